@@ -1,0 +1,215 @@
+"""Decentralised phase oscillators (paper eq. for dphi/dt and the (omega, sigma, xi) schedule).
+
+Pure tensor math: no simulator imports, so the dynamics can be tested and plotted on their own.
+Leg order everywhere is RF, LF, RH, LH. Phases are in radians, wrapped to [0, 2*pi);
+[0, pi) is swing and [pi, 2*pi) is stance. Batched tensors have shape (num_envs, 4);
+parameters have shape (num_envs, 1) and broadcast over the legs.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import torch
+
+TWO_PI = 2.0 * math.pi
+
+# Standing parameters of the schedule: a stable fixed point at mid-stance (3*pi/2) for GRF > 0.
+STANDING_OMEGA = 1.0
+STANDING_COUPLING = 4.0
+STANDING_OFFSET = 1.0
+# Moving: omega = min(|v| + 1.5, 4) Hz.
+MOVING_OMEGA_BIAS = 1.5
+MOVING_OMEGA_MAX = 4.0
+# Lower clamps applied after the training jitter.
+OMEGA_MIN = 0.1
+COUPLING_MIN = 0.0
+
+LEG_NAMES = ("RF", "LF", "RH", "LH")
+
+# Ideal relative phases of LF, RH, LH with respect to RF (analysis protocol §3, paper Sec. II-A).
+# A leg with RPD r lags RF by r, i.e. phi_j = phi_RF - r (protocol §3, oscillator-based RPD).
+_GAIT_RPD = {
+    "trot": (math.pi, math.pi, 0.0),
+    "pace": (math.pi, 0.0, math.pi),
+    "bound": (0.0, math.pi, math.pi),
+    "pronk": (0.0, 0.0, 0.0),
+}
+PHASE_INIT_MODES = ("random", "trot", "pace", "bound", "pronk", "standing")
+
+
+def oscillator_velocity(phase, grf, omega, coupling, offset):
+    """Phase velocity in rad/s: 2*pi*(omega - sigma*GRF*(cos(phi) + xi)). Broadcasts."""
+    return TWO_PI * (omega - coupling * grf * (torch.cos(phase) + offset))
+
+
+def oscillator_params(
+    command_vx: torch.Tensor,
+    coupling_max: float = 1.0,
+    stand_threshold: float = 0.5,
+    omega_noise_std: float = 0.0,
+    coupling_noise_std: float = 0.0,
+    generator: torch.Generator | None = None,
+    coupling_enabled: bool = True,
+):
+    """Schedule (omega [Hz], sigma, xi) from the commanded forward speed; each (num_envs, 1).
+
+    Standing (|v| < stand_threshold, strict as in the released code): (1, 4, 1).
+    Moving: (min(|v| + 1.5, 4), coupling_max, 0).
+    Training jitter N(0, std^2) is added to omega and sigma, then omega >= 0.1 and sigma >= 0.
+    coupling_enabled=False (ORC C=0) makes sigma exactly 0 everywhere, with no jitter: unlike the
+    released code, which kept sigma=4 while standing and a half-normal sigma while moving.
+    """
+    v = torch.as_tensor(command_vx).reshape(-1, 1)
+    if not torch.is_floating_point(v):
+        v = v.float()
+    speed = v.abs()
+    standing = speed < stand_threshold
+
+    omega = torch.where(
+        standing,
+        torch.full_like(speed, STANDING_OMEGA),
+        torch.clamp(speed + MOVING_OMEGA_BIAS, max=MOVING_OMEGA_MAX),
+    )
+    offset = torch.where(standing, torch.full_like(speed, STANDING_OFFSET), torch.zeros_like(speed))
+
+    # Draw omega's noise first so its random stream does not depend on the coupling toggle.
+    if omega_noise_std > 0.0:
+        omega = omega + omega_noise_std * _randn_like(speed, generator)
+        omega = torch.clamp(omega, min=OMEGA_MIN)
+
+    if not coupling_enabled:
+        return omega, torch.zeros_like(speed), offset
+
+    coupling = torch.where(
+        standing, torch.full_like(speed, STANDING_COUPLING), torch.full_like(speed, float(coupling_max))
+    )
+    if coupling_noise_std > 0.0:
+        coupling = coupling + coupling_noise_std * _randn_like(speed, generator)
+    coupling = torch.clamp(coupling, min=COUPLING_MIN)
+    return omega, coupling, offset
+
+
+def integrate_phases(
+    phase: torch.Tensor,
+    grf_substeps: torch.Tensor,
+    omega,
+    coupling,
+    offset,
+    dt: float,
+    process_noise_std: float = 0.0,
+    generator: torch.Generator | None = None,
+):
+    """Explicit Euler over the substep axis of grf_substeps (num_envs, n_substeps, 4).
+
+    Each substep k uses its own GRF and adds 2*pi*eta, eta ~ N(0, process_noise_std^2) [Hz] per leg.
+    Returns (phase wrapped to [0, 2*pi), velocity of the last substep in rad/s incl. noise).
+    """
+    n_sub = grf_substeps.shape[-2]
+    if n_sub < 1:
+        raise ValueError("grf_substeps needs at least one substep")
+    noise = None
+    if process_noise_std > 0.0:
+        # One draw for all substeps keeps the Python loop free of RNG calls.
+        noise = (TWO_PI * process_noise_std) * _randn(
+            grf_substeps.shape, grf_substeps.dtype, grf_substeps.device, generator
+        )
+    vel = None
+    for k in range(n_sub):
+        vel = oscillator_velocity(phase, grf_substeps[..., k, :], omega, coupling, offset)
+        if noise is not None:
+            vel = vel + noise[..., k, :]
+        phase = torch.remainder(phase + vel * dt, TWO_PI)
+    # remainder() can round a tiny negative value up to exactly 2*pi in float32.
+    phase = torch.where(phase >= TWO_PI, phase - TWO_PI, phase)
+    return phase, vel
+
+
+def initial_phases(
+    num_envs: int,
+    mode: str = "random",
+    generator: torch.Generator | None = None,
+    device=None,
+    dtype: torch.dtype = torch.float32,
+) -> torch.Tensor:
+    """Initial phases (num_envs, 4) in [0, 2*pi).
+
+    'random': i.i.d. U[0, 2*pi) per leg. 'trot'/'pace'/'bound'/'pronk': a random common phase for
+    RF plus the ideal relative phases (phi_j = phi_RF - RPD_j). 'standing': all legs at 3*pi/2.
+    """
+    if mode not in PHASE_INIT_MODES:
+        raise ValueError(f"unknown phase init mode {mode!r}; valid modes: {', '.join(PHASE_INIT_MODES)}")
+    if mode == "standing":
+        return torch.full((num_envs, 4), 1.5 * math.pi, dtype=dtype, device=device)
+    if mode == "random":
+        phase = TWO_PI * _rand((num_envs, 4), dtype, generator)
+    else:
+        rel = torch.tensor((0.0,) + _GAIT_RPD[mode], dtype=dtype)
+        phase = TWO_PI * _rand((num_envs, 1), dtype, generator) - rel
+        phase = torch.remainder(phase, TWO_PI)
+        phase = torch.where(phase >= TWO_PI, phase - TWO_PI, phase)
+    return phase.to(device) if device is not None else phase
+
+
+class FixedPoint(NamedTuple):
+    phase: float
+    stability: str  # 'stable' | 'unstable' | 'marginal'
+
+
+def fixed_points(grf: float, omega: float, coupling: float, offset: float, tol: float = 1e-9, probe: float = 1e-4):
+    """Fixed points of the noise-free oscillator for constant GRF, sorted by phase in [0, 2*pi).
+
+    Zeros solve cos(phi) = omega/(sigma*GRF) - xi, found in closed form; the label comes from the
+    sign of oscillator_velocity just before and after each zero: + then - is 'stable',
+    - then + is 'unstable', no sign change (a tangent zero, |cos(phi)| = 1 within tol) is 'marginal'.
+    Raises ValueError when every phase is fixed (omega = 0 and sigma*GRF = 0).
+    """
+    gain = float(coupling) * float(grf)
+    omega = float(omega)
+    if gain == 0.0:
+        if omega == 0.0:
+            raise ValueError("omega = 0 and sigma*GRF = 0: every phase is a fixed point")
+        return []
+    c = omega / gain - float(offset)
+    if abs(c) > 1.0 + tol:
+        return []
+    if abs(abs(c) - 1.0) <= tol:
+        roots = [0.0 if c > 0 else math.pi]
+    else:
+        a = math.acos(c)
+        roots = [a, TWO_PI - a]
+        # Keep the probes between the two zeros when they nearly merge (|c| close to 1).
+        probe = min(probe, 0.25 * min(2.0 * a, TWO_PI - 2.0 * a))
+
+    def vel(p):
+        return float(oscillator_velocity(torch.tensor(p, dtype=torch.float64), grf, omega, coupling, offset))
+
+    out = []
+    for r in roots:
+        before, after = vel(r - probe), vel(r + probe)
+        if before > 0.0 and after < 0.0:
+            label = "stable"
+        elif before < 0.0 and after > 0.0:
+            label = "unstable"
+        else:
+            label = "marginal"
+        out.append(FixedPoint(r, label))
+    return sorted(out)
+
+
+def _randn(shape, dtype, device, generator):
+    if generator is None:
+        return torch.randn(shape, dtype=dtype, device=device)
+    # Draw on the generator's device, then move: torch refuses a generator on another device.
+    return torch.randn(shape, dtype=dtype, device=generator.device, generator=generator).to(device)
+
+
+def _randn_like(x, generator):
+    return _randn(x.shape, x.dtype, x.device, generator)
+
+
+def _rand(shape, dtype, generator):
+    if generator is None:
+        return torch.rand(shape, dtype=dtype)
+    return torch.rand(shape, dtype=dtype, device=generator.device, generator=generator)
