@@ -56,7 +56,8 @@ def oscillator_params(
     """Schedule (omega [Hz], sigma, xi) from the commanded forward speed; each (num_envs, 1).
 
     Standing (|v| < stand_threshold, strict as in the released code): (1, 4, 1).
-    Moving: (min(|v| + 1.5, 4), coupling_max, 0).
+    Moving: (min(|v| + 1.5, 4), coupling_max, 0). The released code used min(1, coupling_max); the two
+    agree for coupling_max <= 1, and using it directly lets evaluation sweep sigma above 1.
     Training jitter N(0, std^2) is added to omega and sigma, then omega >= 0.1 and sigma >= 0.
     coupling_enabled=False (ORC C=0) makes sigma exactly 0 everywhere, with no jitter: unlike the
     released code, which kept sigma=4 while standing and a half-normal sigma while moving.
