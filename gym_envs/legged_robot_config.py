@@ -1,0 +1,127 @@
+"""Typed configuration of a legged-robot task. Tasks subclass these and change defaults.
+
+Every field can be set from the command line as `section.key=value` (see gym_envs.config) and
+is saved as YAML next to each run's checkpoints, so a run can be rebuilt exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class EnvCfg:
+    num_envs: int = 4096
+    episode_length_s: float = 4.0
+    seed: int = 0
+    device: str = "cpu"  # where the task's tensors live; physics of the 'mujoco' backend stays on CPU threads
+
+
+@dataclass
+class SimCfg:
+    backend: str = "mujoco"  # 'mujoco' (CPU threads) or 'warp' (MuJoCo Warp, optional extra)
+    model_path: str = "resources/robots/mini_cheetah/scene.xml"  # relative paths are from the repository root
+    num_threads: int = 0  # 0: all cores
+    foot_sensors: tuple[str, ...] = ("RF_foot_force", "LF_foot_force", "RH_foot_force", "LH_foot_force")
+    termination_sensors: tuple[str, ...] = ("base_force",)
+    termination_force: float = 1.0  # [N] contact force on those bodies that ends an episode
+
+
+@dataclass
+class ControlCfg:
+    """Actions are joint-position offsets from the default pose, times action_scale (per joint of a leg)."""
+
+    frequency_hz: float = 100.0  # the physics timestep comes from the model; decimation = its ratio to this
+    action_scale: tuple[float, ...] = (0.2, 0.3, 0.3)
+    clip_actions: float = 1000.0
+
+
+@dataclass
+class CommandsCfg:
+    """(v_x, v_y, yaw rate) in the body frame, redrawn at reset and every resampling_time_s."""
+
+    resampling_time_s: float = 3.0
+    lin_vel_x: tuple[float, float] = (-1.0, 1.0)
+    # When not empty, v_x is one of these values plus N(0, lin_vel_x_noise^2) instead of lin_vel_x.
+    lin_vel_x_choices: tuple[float, ...] = ()
+    lin_vel_x_noise: float = 0.0
+    lin_vel_y: tuple[float, float] = (-1.0, 1.0)
+    yaw_rate: tuple[float, float] = (-1.0, 1.0)
+    small_command_norm: float = 0.0  # planar commands at or below this norm are zeroed
+    # Independent masks applied after drawing (probabilities per draw).
+    zero_lateral_and_yaw_prob: float = 0.0
+    zero_planar_prob: float = 0.0
+    zero_all_prob: float = 0.0
+
+
+@dataclass
+class ObservationsCfg:
+    """Named terms, each divided by its scale; actor terms get uniform noise of half-width noise/scale."""
+
+    actor: tuple[str, ...] = ()
+    critic: tuple[str, ...] = ()
+    # One value, or one per joint of a leg (repeated over legs), or one per element.
+    scales: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    noise: dict[str, tuple[float, ...]] = field(default_factory=dict)  # half-widths in physical units
+    noise_scale: float = 1.0  # 0 turns actor noise off
+
+
+@dataclass
+class RewardsCfg:
+    """weights[name] multiplies the task's _reward_<name>; the sum is scaled by the control dt."""
+
+    weights: dict[str, float] = field(default_factory=dict)
+    termination_penalty: float = 0.0  # subtracted on a terminated step, not scaled by dt
+    tracking_sigma: float = 0.25
+    base_height_target: float = 0.33
+
+
+@dataclass
+class InitStateCfg:
+    """How envs are reset: 'range' draws the base velocity from ranges; 'default' is the home pose at rest."""
+
+    mode: str = "default"
+    base_height: float = 0.33
+    lin_vel_x: tuple[float, float] = (0.0, 0.0)
+    lin_vel_y: tuple[float, float] = (0.0, 0.0)
+    lin_vel_z: tuple[float, float] = (0.0, 0.0)
+    haa_noise: float = 0.0  # abduction joints start within +- this of the default [rad]
+    # Share of timed-out (not terminated) envs whose pose is re-initialised; the rest keep moving.
+    timeout_reset_ratio: float = 1.0
+
+
+@dataclass
+class PushCfg:
+    enabled: bool = False
+    interval_s: float = 10.0  # all envs are pushed at once, every interval
+    max_vel_xy: float = 0.2  # [m/s] added to the base velocity, uniform in +-
+
+
+@dataclass
+class DomainRandCfg:
+    randomize_friction: bool = False
+    friction_range: tuple[float, float] = (0.5, 1.25)
+    friction_buckets: int = 64  # values drawn once; each env picks one for the whole run
+    # MuJoCo combines frictions with max; the floor gets (robot + ground) / 2 to mimic PhysX's average.
+    ground_friction: float = 1.0
+    randomize_base_mass: bool = False
+    added_mass_range: tuple[float, float] = (-1.0, 1.0)
+    randomize_base_com: bool = False
+    com_offset_range: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] = (
+        (0.0, 0.0),
+        (0.0, 0.0),
+        (0.0, 0.0),
+    )
+
+
+@dataclass
+class LeggedRobotCfg:
+    env: EnvCfg = field(default_factory=EnvCfg)
+    sim: SimCfg = field(default_factory=SimCfg)
+    control: ControlCfg = field(default_factory=ControlCfg)
+    commands: CommandsCfg = field(default_factory=CommandsCfg)
+    observations: ObservationsCfg = field(default_factory=ObservationsCfg)
+    rewards: RewardsCfg = field(default_factory=RewardsCfg)
+    init_state: InitStateCfg = field(default_factory=InitStateCfg)
+    push: PushCfg = field(default_factory=PushCfg)
+    domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)

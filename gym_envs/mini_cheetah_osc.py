@@ -1,0 +1,193 @@
+"""mini_cheetah_osc: the Mini Cheetah with one decentralised phase oscillator per leg (the paper's task).
+
+Each oscillator is driven by its own foot's normalised ground reaction force and integrated at
+every physics substep with that substep's force. The ORC string switches the phase observations,
+the phase rewards and the coupling; see gym_envs/orc.py.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+
+from gym_envs import oscillators
+from gym_envs.config import ConfigError
+from gym_envs.legged_robot_config import (
+    CommandsCfg,
+    ControlCfg,
+    DomainRandCfg,
+    EnvCfg,
+    InitStateCfg,
+    ObservationsCfg,
+    PushCfg,
+    RewardsCfg,
+)
+from gym_envs.mini_cheetah import PROPRIOCEPTION, MiniCheetah, MiniCheetahCfg
+from gym_envs.orc import parse_orc
+
+OSCILLATOR_OBSERVATIONS = ("oscillator_obs", "oscillators_vel")
+PHASE_REWARDS = ("swing_grf", "stance_grf")
+
+
+@dataclass
+class OscillatorCfg:
+    orc: str = "111"
+    init: str = "random"  # one of gym_envs.oscillators.PHASE_INIT_MODES
+    process_noise_std: float = 0.25  # [Hz] per leg and substep (released code; not in the paper)
+    omega_noise_std: float = 0.25  # training jitter of omega, redrawn every control step
+    coupling_noise_std: float = 0.25
+    coupling_max: float = 1.0  # sigma while moving
+    stand_threshold: float = 0.5  # |v_x| below this uses the standing parameters
+    # Quirk switches of the released code, off by default:
+    hold_grf: bool = False  # integrate all substeps with the previous control step's last force
+    grf_normaliser_mass: float = 0.0  # [kg]; 0 uses the model's mass (8.952), the release used 8.292
+
+
+@dataclass
+class MiniCheetahOscCfg(MiniCheetahCfg):
+    env: EnvCfg = field(default_factory=lambda: EnvCfg(episode_length_s=4.0))
+    control: ControlCfg = field(default_factory=lambda: ControlCfg(action_scale=(0.2, 0.3, 0.3)))
+    commands: CommandsCfg = field(
+        default_factory=lambda: CommandsCfg(
+            resampling_time_s=3.0,
+            lin_vel_x_choices=(-3.0, -1.0, 0.0, 1.0, 3.0),
+            lin_vel_x_noise=1.0,
+            lin_vel_y=(-1.0, 1.0),
+            yaw_rate=(-3.0, 3.0),
+            zero_lateral_and_yaw_prob=0.2,
+            zero_planar_prob=0.2,
+            zero_all_prob=0.1,
+        )
+    )
+    observations: ObservationsCfg = field(
+        default_factory=lambda: ObservationsCfg(
+            actor=PROPRIOCEPTION + ("oscillator_obs", "dof_pos_target"),
+            critic=("base_height", "base_lin_vel")
+            + PROPRIOCEPTION
+            + ("oscillator_obs", "oscillators_vel", "dof_pos_target"),
+            scales={
+                "base_height": (0.3,),
+                "base_lin_vel": (0.33,),
+                "base_ang_vel": (0.3, 0.3, 0.1),
+                "commands": (3.0, 1.0, 3.0),
+                "dof_pos_obs": (0.2, 0.3, 0.3),
+                "dof_vel": (2.0, 2.0, 4.0),
+                "dof_pos_target": (0.2, 0.3, 0.3),
+            },
+            # Projected gravity gets no noise, as in the released code.
+            noise={"base_ang_vel": (0.01,), "dof_pos_obs": (0.01,), "dof_vel": (0.005,)},
+        )
+    )
+    rewards: RewardsCfg = field(
+        default_factory=lambda: RewardsCfg(
+            weights={
+                "tracking_lin_vel": 4.0,
+                "tracking_ang_vel": 2.0,
+                "orientation": 1.0,
+                "min_base_height": 1.5,
+                "torques": 5e-7,
+                "action_rate": 0.01,
+                "action_rate2": 0.001,
+                "cursorial": 0.25,
+                "swing_grf": 5.0,
+                "stance_grf": 5.0,
+            },
+            termination_penalty=0.15,
+            base_height_target=0.36,
+        )
+    )
+    init_state: InitStateCfg = field(
+        default_factory=lambda: InitStateCfg(
+            mode="range",
+            base_height=0.35,
+            lin_vel_x=(-0.5, 2.0),
+            lin_vel_z=(-0.05, 0.05),
+            haa_noise=1e-5,
+            timeout_reset_ratio=0.75,
+        )
+    )
+    push: PushCfg = field(default_factory=lambda: PushCfg(enabled=True, interval_s=10.0, max_vel_xy=0.2))
+    domain_rand: DomainRandCfg = field(
+        default_factory=lambda: DomainRandCfg(randomize_friction=True, friction_range=(0.4, 1.0))
+    )
+    osc: OscillatorCfg = field(default_factory=OscillatorCfg)
+
+
+def apply_orc(cfg: MiniCheetahOscCfg) -> MiniCheetahOscCfg:
+    """Make the observation groups and reward weights say what cfg.osc.orc says (in place)."""
+    orc = parse_orc(cfg.osc.orc)
+    obs = cfg.observations
+    if not orc.observations:
+        obs.actor = tuple(t for t in obs.actor if t not in OSCILLATOR_OBSERVATIONS)
+        obs.critic = tuple(t for t in obs.critic if t not in OSCILLATOR_OBSERVATIONS)
+    if not orc.rewards:
+        cfg.rewards.weights = {k: (0.0 if k in PHASE_REWARDS else w) for k, w in cfg.rewards.weights.items()}
+    return cfg
+
+
+class MiniCheetahOsc(MiniCheetah):
+    cfg: MiniCheetahOscCfg
+
+    def __init__(self, cfg: MiniCheetahOscCfg):
+        self.orc = parse_orc(cfg.osc.orc)
+        if cfg.osc.init not in oscillators.PHASE_INIT_MODES:
+            raise ConfigError(
+                f"osc.init={cfg.osc.init!r} is unknown; choose one of {', '.join(oscillators.PHASE_INIT_MODES)}"
+            )
+        apply_orc(cfg)
+        super().__init__(cfg)
+
+    def _init_buffers(self) -> None:
+        super()._init_buffers()
+        n, dev = self.num_envs, self.device
+        mass = self.cfg.osc.grf_normaliser_mass or self.sim.robot_mass
+        self.grf_normaliser = mass * self.sim.gravity
+        self.phase = torch.zeros(n, self.num_legs, device=dev)
+        self.phase_vel = torch.zeros(n, self.num_legs, device=dev)
+        self.grf = torch.zeros(n, self.num_legs, device=dev)  # normalised GRF after the last substep
+        self.omega = torch.zeros(n, 1, device=dev)
+        self.coupling = torch.zeros(n, 1, device=dev)
+        self.offset = torch.zeros(n, 1, device=dev)
+
+    def _pre_physics_step(self) -> None:
+        osc = self.cfg.osc
+        self.omega, self.coupling, self.offset = oscillators.oscillator_params(
+            self.commands[:, 0],
+            coupling_max=osc.coupling_max,
+            stand_threshold=osc.stand_threshold,
+            omega_noise_std=osc.omega_noise_std,
+            coupling_noise_std=osc.coupling_noise_std,
+            generator=self.generator,
+            coupling_enabled=self.orc.coupling,
+        )
+
+    def _after_physics(self) -> None:
+        grf = torch.clamp(self.foot_forces / self.grf_normaliser, 0.0, 1.0)  # (N, substeps, legs)
+        drive = self.grf.unsqueeze(1).expand_as(grf) if self.cfg.osc.hold_grf else grf
+        self.phase, self.phase_vel = oscillators.integrate_phases(
+            self.phase, drive, self.omega, self.coupling, self.offset, self.physics_dt,
+            process_noise_std=self.cfg.osc.process_noise_std, generator=self.generator,
+        )
+        self.grf = grf[:, -1]
+
+    def _reset_task_state(self, env_ids: torch.Tensor) -> None:
+        self.phase[env_ids] = oscillators.initial_phases(
+            len(env_ids), self.cfg.osc.init, generator=self.generator, device=self.device
+        )
+        self.phase_vel[env_ids] = 0.0
+        self.grf[env_ids] = 0.0
+
+    # observations: cos block then sin block, as in the released code
+    def _obs_oscillator_obs(self):
+        return torch.cat([torch.cos(self.phase), torch.sin(self.phase)], dim=1)
+
+    def _obs_oscillators_vel(self):
+        return self.phase_vel
+
+    # phase rewards: [0, pi) is swing (contact penalised), [pi, 2 pi) stance (contact rewarded)
+    def _reward_swing_grf(self):
+        return -torch.sum(torch.clamp(torch.sin(self.phase), min=0.0) * self.grf, dim=1)
+
+    def _reward_stance_grf(self):
+        return torch.sum(torch.clamp(-torch.sin(self.phase), min=0.0) * self.grf, dim=1)

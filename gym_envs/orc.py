@@ -1,0 +1,36 @@
+"""The ORC ablation string: which of phase Observations, phase Rewards and Coupling are on."""
+
+from __future__ import annotations
+
+import warnings
+from typing import NamedTuple
+
+from gym_envs.config import ConfigError
+
+# The configurations of the paper; 001 is left out there because it equals 000.
+PAPER_CONFIGURATIONS = ("000", "100", "101", "010", "110", "011", "111")
+
+
+class ORC(NamedTuple):
+    observations: bool
+    rewards: bool
+    coupling: bool
+
+    def __str__(self) -> str:
+        return "".join("1" if on else "0" for on in self)
+
+
+def parse_orc(text: str) -> ORC:
+    """'110' -> ORC(True, True, False). Anything but three 0/1 digits is an error."""
+    if not isinstance(text, str) or len(text) != 3 or set(text) - {"0", "1"}:
+        raise ConfigError(
+            f"malformed ORC string {text!r}; use three digits of 0/1 for Observations, Rewards, Coupling, e.g. 111"
+        )
+    orc = ORC(*(c == "1" for c in text))
+    if text == "001":
+        warnings.warn(
+            "ORC 001 equals 000: without phase observations or phase rewards the oscillators cannot "
+            "affect the policy, so coupling alone changes nothing",
+            stacklevel=2,
+        )
+    return orc
