@@ -1,7 +1,10 @@
-"""Step rate of the simulation layer against raw `mujoco.batch` stepping of the same model.
+"""Step rates of the simulation layer and of the full task against raw `mujoco.batch` stepping.
 
-Both run in one process on the same number of threads, in alternating rounds, so
-machine noise hits them alike; the ratio of the medians is the figure to quote.
+Three contenders, one process, the same threads, in alternating rounds so machine
+noise hits them alike; the median of the per-round ratios is the figure to quote:
+- raw: `mujoco.batch.Batch.step` of the same model, controls written from numpy;
+- layer: the backend's step (per-substep records, torch conversion, divergence checks);
+- env: the whole `mini_cheetah_osc` control step (oscillators, rewards, resets, observations).
 
     python bench/sim_throughput.py                    # 4096 envs, 2 threads, 5 substeps
     python bench/sim_throughput.py --num_envs 512 --rounds 3
@@ -18,6 +21,7 @@ import mujoco.batch
 import numpy as np
 import torch
 
+from gym_envs import env_cfg_class, make_env
 from gym_envs.sim import make_backend
 
 SCENE = "resources/robots/mini_cheetah/scene.xml"
@@ -65,17 +69,33 @@ def main() -> None:
         layer.step(home_t + noise_t[i[0] % args.steps], args.substeps)
         i[0] += 1
 
-    raw_step(), layer_step()  # warm up both
-    raw_rates, layer_rates = [], []
+    cfg = env_cfg_class("mini_cheetah_osc")()
+    cfg.env.num_envs, cfg.sim.num_threads = n, args.threads
+    env = make_env("mini_cheetah_osc", cfg)
+    actions = [torch.randn(n, env.num_actions, generator=torch.Generator().manual_seed(i)) for i in range(args.steps)]
+
+    def env_step(i=[0]):
+        env.step(actions[i[0] % args.steps])
+        i[0] += 1
+
+    contenders = {"raw": raw_step, "layer": layer_step, "env": env_step}
+    rates = {name: [] for name in contenders}
+    for fn in contenders.values():
+        fn()  # warm up
     for _ in range(args.rounds):
-        raw_rates.append(timed(raw_step, args.steps) * n)
-        layer_rates.append(timed(layer_step, args.steps) * n)
-    raw_rate, layer_rate = statistics.median(raw_rates), statistics.median(layer_rates)
-    ratios = [a / b for a, b in zip(layer_rates, raw_rates)]
+        for name, fn in contenders.items():
+            rates[name].append(timed(fn, args.steps) * n)
+    median = {name: statistics.median(r) for name, r in rates.items()}
+
+    def ratio(name):
+        return statistics.median(a / b for a, b in zip(rates[name], rates["raw"]))
+
     print(f"envs {n}, threads {args.threads}, substeps {args.substeps}, {args.rounds} rounds of {args.steps} steps")
-    print(f"raw mujoco.batch: {raw_rate:,.0f} env-steps/s ({raw_rate * args.substeps:,.0f} physics steps/s)")
-    print(f"layer (records + torch): {layer_rate:,.0f} env-steps/s")
-    print(f"layer/raw ratio: {statistics.median(ratios):.3f}")
+    print(f"raw mujoco.batch: {median['raw']:,.0f} env-steps/s ({median['raw'] * args.substeps:,.0f} physics steps/s)")
+    print(f"layer (records + torch): {median['layer']:,.0f} env-steps/s")
+    print(f"env (mini_cheetah_osc step): {median['env']:,.0f} env-steps/s")
+    print(f"layer/raw ratio: {ratio('layer'):.3f}")
+    print(f"env/raw ratio: {ratio('env'):.3f}")
 
 
 if __name__ == "__main__":

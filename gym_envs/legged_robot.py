@@ -18,7 +18,7 @@ import torch
 from tensordict import TensorDict
 
 from gym_envs.config import ConfigError
-from gym_envs.legged_robot_config import LeggedRobotCfg
+from gym_envs.legged_robot_config import CommandsCfg, LeggedRobotCfg
 from gym_envs.sim import SimBackend, SimState, make_backend
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -33,6 +33,27 @@ def quat_rotate_inverse(quat: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:
 
 def _uniform(low, high, shape, generator, device) -> torch.Tensor:
     return low + (high - low) * torch.rand(shape, generator=generator, device=device)
+
+
+def sample_commands(c: CommandsCfg, n: int, generator: torch.Generator, device) -> torch.Tensor:
+    """Draw n commands (v_x, v_y, yaw rate) as the config says, zeroing masks included."""
+    cmd = torch.empty(n, 3, device=device)
+    if c.lin_vel_x_choices:
+        choices = torch.tensor(c.lin_vel_x_choices, device=device)
+        picks = choices[torch.randint(0, len(choices), (n,), generator=generator, device=device)]
+        cmd[:, 0] = picks + c.lin_vel_x_noise * torch.randn(n, generator=generator, device=device)
+    else:
+        cmd[:, 0] = _uniform(*c.lin_vel_x, (n,), generator, device)
+    cmd[:, 1] = _uniform(*c.lin_vel_y, (n,), generator, device)
+    cmd[:, 2] = _uniform(*c.yaw_rate, (n,), generator, device)
+    if c.small_command_norm > 0:
+        cmd[:, :2] *= (torch.norm(cmd[:, :2], dim=1, keepdim=True) > c.small_command_norm).float()
+    masks = ((c.zero_lateral_and_yaw_prob, (1, 2)), (c.zero_planar_prob, (0, 1)), (c.zero_all_prob, (0, 1, 2)))
+    for prob, cols in masks:
+        if prob > 0:
+            keep = (torch.rand(n, 1, generator=generator, device=device) >= prob).float()
+            cmd[:, list(cols)] *= keep
+    return cmd
 
 
 class LeggedRobot:
@@ -271,26 +292,8 @@ class LeggedRobot:
         self._update_state(self.sim.read_state())
 
     def _resample_commands(self, env_ids: torch.Tensor) -> None:
-        n = len(env_ids)
-        if n == 0:
-            return
-        c, gen, dev = self.cfg.commands, self.generator, self.device
-        cmd = torch.empty(n, 3, device=dev)
-        if c.lin_vel_x_choices:
-            choices = torch.tensor(c.lin_vel_x_choices, device=dev)
-            picks = choices[torch.randint(0, len(choices), (n,), generator=gen, device=dev)]
-            cmd[:, 0] = picks + c.lin_vel_x_noise * torch.randn(n, generator=gen, device=dev)
-        else:
-            cmd[:, 0] = _uniform(*c.lin_vel_x, (n,), gen, dev)
-        cmd[:, 1] = _uniform(*c.lin_vel_y, (n,), gen, dev)
-        cmd[:, 2] = _uniform(*c.yaw_rate, (n,), gen, dev)
-        if c.small_command_norm > 0:
-            cmd[:, :2] *= (torch.norm(cmd[:, :2], dim=1, keepdim=True) > c.small_command_norm).float()
-        for prob, cols in ((c.zero_lateral_and_yaw_prob, [1, 2]), (c.zero_planar_prob, [0, 1]), (c.zero_all_prob, [0, 1, 2])):
-            if prob > 0:
-                hit = torch.rand(n, generator=gen, device=dev) < prob
-                cmd[hit.nonzero().flatten()[:, None], torch.tensor(cols, device=dev)] = 0.0
-        self.commands[env_ids] = cmd
+        if len(env_ids) > 0:
+            self.commands[env_ids] = sample_commands(self.cfg.commands, len(env_ids), self.generator, self.device)
 
     # --- observations ---------------------------------------------------------------------------
 

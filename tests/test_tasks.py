@@ -1,0 +1,288 @@
+"""The legged-robot MDP and the mini_cheetah_osc task: observations, rewards, commands, resets, ORC."""
+
+import math
+import warnings
+
+import pytest
+import torch
+
+from gym_envs import ConfigError, UnknownTaskError, env_cfg_class, make_env
+from gym_envs.config import apply_overrides
+from gym_envs.legged_robot import sample_commands
+from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
+from gym_envs.orc import parse_orc
+
+TWO_PI = 2 * math.pi
+
+
+def osc_env(num_envs=4, overrides=(), **osc):
+    cfg = MiniCheetahOscCfg()
+    cfg.env.num_envs = num_envs
+    cfg.sim.num_threads = 1
+    for key, value in osc.items():
+        setattr(cfg.osc, key, value)
+    return make_env("mini_cheetah_osc", apply_overrides(cfg, list(overrides)))
+
+
+def quiet_standing(num_envs=4, **osc):
+    """Standing command, no noise, jitter, pushes or command changes: the evaluation setting."""
+    overrides = [
+        "observations.noise_scale=0", "osc.process_noise_std=0", "osc.omega_noise_std=0",
+        "osc.coupling_noise_std=0", "push.enabled=false", "commands.resampling_time_s=1000",
+        "env.episode_length_s=1000", "init_state.mode=default",
+    ]
+    env = osc_env(num_envs, overrides, **osc)
+    env.commands[:] = 0.0
+    return env
+
+
+# --- observation sizes and the ORC switch ----------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "orc, actor, critic",
+    [("111", 53, 61), ("110", 53, 61), ("101", 53, 61), ("100", 53, 61), ("011", 45, 49), ("010", 45, 49), ("000", 45, 49)],
+)
+def test_observation_sizes_per_orc(orc, actor, critic):
+    obs = osc_env(2, orc=orc).get_observations()
+    assert obs["actor"].shape == (2, actor) and obs["critic"].shape == (2, critic)
+
+
+def test_parent_task_observations():
+    cfg = env_cfg_class("mini_cheetah")()
+    cfg.env.num_envs = 2
+    obs = make_env("mini_cheetah", cfg).get_observations()
+    assert obs["actor"].shape == (2, 37) and obs["critic"].shape == (2, 37)
+
+
+@pytest.mark.parametrize("text", ["11", "1111", "112", "abc", "", "1 1"])
+def test_malformed_orc_is_an_error(text):
+    with pytest.raises(ConfigError, match="malformed ORC string"):
+        parse_orc(text)
+
+
+def test_orc_001_says_it_equals_000():
+    with pytest.warns(UserWarning, match="001 equals 000"):
+        assert parse_orc("001") == (False, False, True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        parse_orc("111")
+
+
+def test_orc_r0_removes_phase_rewards_only():
+    env = osc_env(2, orc="101")
+    assert "swing_grf" not in env.reward_functions and "stance_grf" not in env.reward_functions
+    assert "tracking_lin_vel" in env.reward_functions
+    assert "swing_grf" in osc_env(2, orc="111").reward_functions
+
+
+def test_orc_c0_means_no_coupling_anywhere():
+    env = osc_env(64, orc="110")  # training jitter stays on
+    env.commands[:32, 0] = 0.0  # standing
+    env.commands[32:, 0] = 2.0  # moving
+    env._pre_physics_step()
+    assert torch.all(env.coupling == 0.0)
+    env = osc_env(64, orc="111")
+    env.commands[:32, 0] = 0.0
+    env._pre_physics_step()
+    assert env.coupling[:32].mean() == pytest.approx(4.0, abs=0.2)
+
+
+def test_unknown_task_lists_the_known_ones():
+    with pytest.raises(UnknownTaskError, match="unknown task 'mini_cheetah_os'; known tasks: mini_cheetah, mini_cheetah_osc"):
+        make_env("mini_cheetah_os")
+
+
+def test_unknown_reward_weight_is_an_error():
+    cfg = MiniCheetahOscCfg()
+    cfg.env.num_envs = 2
+    cfg.rewards.weights["tracking_lin_velocity"] = 1.0
+    with pytest.raises(ConfigError, match="no _reward_tracking_lin_velocity; known terms:.*tracking_lin_vel"):
+        make_env("mini_cheetah_osc", cfg)
+
+
+def test_unknown_observation_term_is_an_error():
+    cfg = MiniCheetahOscCfg()
+    cfg.env.num_envs = 2
+    cfg.observations.actor = cfg.observations.actor + ("foot_height",)
+    with pytest.raises(ConfigError, match="lists 'foot_height'"):
+        make_env("mini_cheetah_osc", cfg)
+
+
+def test_control_rate_must_divide_physics_rate():
+    cfg = MiniCheetahOscCfg()
+    cfg.env.num_envs = 2
+    cfg.control.frequency_hz = 300.0
+    with pytest.raises(ConfigError, match="control.frequency_hz=300"):
+        make_env("mini_cheetah_osc", cfg)
+
+
+# --- reward terms on hand-made states --------------------------------------------------------------
+
+
+def test_phase_rewards_sign_and_scale():
+    env = quiet_standing(2)
+    env.phase[:] = torch.tensor([[0.5 * math.pi] * 4, [1.5 * math.pi] * 4])  # env 0 swing, env 1 stance
+    env.grf[:] = 0.25
+    assert env._reward_swing_grf().tolist() == pytest.approx([-1.0, 0.0])  # contact in swing penalised
+    assert env._reward_stance_grf().tolist() == pytest.approx([0.0, 1.0])  # contact in stance rewarded
+    env.grf[:] = 0.0
+    assert env._reward_swing_grf().tolist() == pytest.approx([0.0, 0.0])
+
+
+def test_tracking_orientation_and_height_rewards():
+    env = quiet_standing(2)
+    env.commands[:] = torch.tensor([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    env.base_lin_vel = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    track = env._reward_tracking_lin_vel()
+    assert track[0] == pytest.approx(1.0) and track[1] == pytest.approx(math.exp(-(0.5**2) / 0.25))
+    env.base_ang_vel = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    yaw = env._reward_tracking_ang_vel()
+    assert yaw[0] == pytest.approx(1.0) and yaw[1] == pytest.approx(math.exp(-((1 / 5) ** 4) / 0.25))
+    env.projected_gravity = torch.tensor([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    assert env._reward_orientation().tolist() == pytest.approx([2.0, 1.0 + math.exp(-4.0)])
+    env.state.base_pos[:, 2] = torch.tensor([0.40, 0.06])
+    assert env._reward_min_base_height().tolist() == pytest.approx([1.0, math.exp(-1.0 / 0.25)])
+
+
+def test_penalties_are_negative_and_scaled():
+    env = quiet_standing(1)
+    env.joint_torques = torch.zeros(1, env.decimation, 12)
+    env.joint_torques[0, -1, 0] = 10.0
+    assert env._reward_torques().item() == pytest.approx(-100.0)
+    env.target_history[:] = 0.0
+    env.target_history[0, 0, 0] = 0.05
+    assert env._reward_action_rate().item() == pytest.approx(-1.0)  # (0.05 / 0.05)^2
+    assert env._reward_action_rate2().item() == pytest.approx(-1.0)
+    env.joint_pos = env.default_joint_pos.clone().unsqueeze(0)
+    env.joint_pos[0, 0] = 0.2  # one abduction joint at 0.2 rad
+    assert env._reward_cursorial().item() == pytest.approx(-0.25)
+
+
+def test_step_reward_is_weighted_sum_times_dt():
+    env = quiet_standing(2)
+    env.step(torch.zeros(2, 12))
+    expected = sum(fn() * env.reward_weights[name] * env.dt for name, fn in env.reward_functions.items())
+    assert torch.allclose(env.rew_buf, expected)
+
+
+# --- commands ----------------------------------------------------------------------------------------
+
+
+def test_command_zeroing_rates_match_the_released_distribution():
+    cmd = sample_commands(MiniCheetahOscCfg().commands, 200_000, torch.Generator().manual_seed(1), "cpu")
+    nonzero = (cmd != 0).float().mean(dim=0)
+    assert nonzero[0] == pytest.approx(0.72, abs=0.01)  # v_x survives 0.8 * 0.9
+    assert nonzero[1] == pytest.approx(0.576, abs=0.01)  # v_y survives 0.8 * 0.8 * 0.9
+    assert nonzero[2] == pytest.approx(0.72, abs=0.01)
+    assert (cmd == 0).all(dim=1).float().mean() == pytest.approx(0.136, abs=0.01)
+    assert (cmd[:, 0].abs() < 0.5).float().mean() == pytest.approx(0.41, abs=0.01)
+
+
+def test_commands_resample_on_schedule():
+    env = osc_env(8, ["push.enabled=false"])
+    env.commands[:] = 99.0
+    env.episode_length_buf[:] = torch.arange(8) + env.resample_interval - 4
+    env.step(torch.zeros(8, 12))
+    redrawn = (env.commands != 99.0).any(dim=1)
+    assert redrawn.tolist() == [i == 3 for i in range(8)]  # only the env whose counter hit 300
+
+
+# --- terminations, time-outs and resets ---------------------------------------------------------------
+
+
+def test_timeouts_are_not_terminations():
+    env = quiet_standing(4)
+    env.step(torch.zeros(4, 12))
+    env.episode_length_buf[:2] = env.max_episode_length
+    _, _, dones, extras = env.step(torch.zeros(4, 12))
+    assert dones.tolist() == [True, True, False, False]
+    assert extras["time_outs"].tolist() == [True, True, False, False]
+    assert not env.terminated.any()
+    assert env.episode_length_buf[:2].tolist() == [0, 0]
+
+
+def test_some_timed_out_robots_keep_their_state():
+    env = quiet_standing(64)
+    env.cfg.init_state.timeout_reset_ratio = 0.0  # keep all
+    for _ in range(20):
+        env.step(torch.zeros(64, 12))
+    before = env.state.base_pos.clone()
+    phases = env.phase.clone()
+    env.episode_length_buf[:] = env.max_episode_length
+    env.step(torch.zeros(64, 12))
+    assert torch.allclose(env.state.base_pos, before, atol=0.01)  # kept moving from where it was
+    assert (env.phase - phases).abs().max() > 1.0  # but its phases were redrawn
+
+
+def test_fallen_robot_terminates_with_penalty():
+    env = quiet_standing(2)
+    flipped = torch.tensor([[0.0, 1.0, 0.0, 0.0]])  # upside down
+    env.sim.reset(torch.tensor([1]), torch.tensor([[0.0, 0.0, 0.12]]), flipped, torch.zeros(1, 3),
+                  torch.zeros(1, 3), env.default_joint_pos[None], torch.zeros(1, 12))
+    for _ in range(30):
+        _, reward, dones, _ = env.step(torch.zeros(2, 12))
+        if dones[1]:
+            break
+    assert dones[1] and env.terminated[1] and not env.terminated[0]
+    assert reward[1] == pytest.approx(-env.cfg.rewards.termination_penalty)
+    assert env.state.base_pos[1, 2] > 0.3  # reset to the start height
+
+
+def test_diverged_env_is_reset_and_training_goes_on():
+    env = quiet_standing(3)
+    env.step(torch.zeros(3, 12))
+    env.sim._qvel[2, :] = 1e12
+    _, _, dones, _ = env.step(torch.zeros(3, 12))
+    assert dones.tolist() == [False, False, True]
+    _, reward, _, _ = env.step(torch.zeros(3, 12))
+    assert torch.isfinite(reward).all()
+
+
+def test_same_seed_same_rollout():
+    def rollout():
+        env = osc_env(8)
+        gen = torch.Generator().manual_seed(0)
+        for _ in range(30):
+            obs, reward, _, _ = env.step(torch.randn(8, 12, generator=gen))
+        return obs["actor"], reward
+
+    (a_obs, a_rew), (b_obs, b_rew) = rollout(), rollout()
+    assert torch.equal(a_obs, b_obs) and torch.equal(a_rew, b_rew)
+
+
+# --- oscillators in the env ----------------------------------------------------------------------------
+
+
+def test_standing_robot_oscillators_settle_mid_stance():
+    env = quiet_standing(8)
+    env.phase[:] = torch.linspace(0.1, 6.2, 32).reshape(8, 4)
+    for _ in range(400):  # 4 s with a zero policy and a standing command
+        env.step(torch.zeros(8, 12))
+    # Each phase rests at the stable fixed point of eq. 5 for its foot's load, cos(phi) = 1/(4 GRF) - 1:
+    # 3*pi/2 at a quarter of the weight. This robot rests nose-up, hind feet carrying more than the
+    # front ones, so the front phases sit later in stance and the hind ones earlier.
+    expected = TWO_PI - torch.arccos(1.0 / (4.0 * env.grf) - 1.0)
+    assert torch.allclose(env.phase, expected, atol=0.05)
+    distance = torch.remainder(env.phase - 1.5 * math.pi + math.pi, TWO_PI) - math.pi
+    assert distance.abs().max() < math.pi / 4  # well inside stance [pi, 2*pi)
+    assert env.get_observations()["critic"][:, -16:-12].abs().max() < 1.0  # phase velocities near 0
+
+
+def test_per_substep_force_differs_from_held_force():
+    envs = [quiet_standing(4, hold_grf=hold) for hold in (False, True)]
+    for env in envs:
+        env.phase[:] = torch.tensor([0.3, 1.7, 3.1, 4.5])
+    for _ in range(40):  # the robot lands and loads its feet: forces change within control steps
+        for env in envs:
+            env.step(torch.zeros(4, 12))
+    assert torch.equal(envs[0].state.base_pos, envs[1].state.base_pos)  # the physics is the same
+    assert (envs[0].phase - envs[1].phase).abs().max() > 1e-3
+
+
+def test_grf_is_normalised_by_the_models_weight():
+    env = quiet_standing(2)
+    for _ in range(200):
+        env.step(torch.zeros(2, 12))
+    assert env.grf.sum(dim=1).tolist() == pytest.approx([1.0, 1.0], abs=0.05)
+    assert env.grf_normaliser == pytest.approx(8.952 * 9.81, rel=1e-3)
