@@ -1,5 +1,8 @@
 """The Mini Cheetah model and the CPU batch backend."""
 
+import importlib
+import sys
+
 import numpy as np
 import pytest
 import torch
@@ -130,3 +133,17 @@ def test_wrong_control_shape_is_named(make_sim):
     sim = make_sim(num_envs=2)
     with pytest.raises(ValueError, match=r"shape \(2, 12\).*got \(2, 11\)"):
         sim.step(torch.zeros(2, 11), SUBSTEPS)
+
+
+def test_missing_warp_extra_is_named(monkeypatch):
+    monkeypatch.setitem(sys.modules, "mujoco_warp", None)  # importing it now raises ImportError
+    monkeypatch.delitem(sys.modules, "gym_envs.sim.mujoco_warp", raising=False)
+    with pytest.raises(SimSetupError, match=r"^the 'warp' backend needs the gpu extra: pip install -e \.\[gpu\]$"):
+        importlib.import_module("gym_envs.sim.mujoco_warp")
+
+
+def test_unknown_backend_is_named():
+    from gym_envs.sim import make_backend
+
+    with pytest.raises(SimSetupError, match="unknown simulation backend 'bullet'; choose one of mujoco, warp"):
+        make_backend("bullet")

@@ -7,14 +7,13 @@ into preallocated buffers. Results are bit-identical at any thread count.
 
 from __future__ import annotations
 
-import os
-
 import mujoco
 import mujoco.batch
 import numpy as np
 import torch
 
-from gym_envs.sim.backend import SimBackend, SimSetupError, SimState, StepResult
+from gym_envs.sim.backend import SimState, StepResult
+from gym_envs.sim.mujoco_model import MujocoModelBackend, as_index
 
 # Warnings MuJoCo raises (and then resets the simulation for) when the state blows up.
 _DIVERGENCE_WARNINGS = [
@@ -22,21 +21,7 @@ _DIVERGENCE_WARNINGS = [
     int(mujoco.mjtWarning.mjWARN_BADQVEL),
     int(mujoco.mjtWarning.mjWARN_BADQACC),
 ]
-_HOME_KEY = "home"
-
-
-def load_model(model_path: str) -> mujoco.MjModel:
-    """Compile an MJCF file, turning every failure into one line that names the file."""
-    if not os.path.isfile(model_path):
-        raise SimSetupError(f"model file not found: {model_path!r}; check the task's asset.model_path")
-    try:
-        return mujoco.MjModel.from_xml_path(model_path)
-    except ValueError as err:
-        detail = " ".join(str(err).split())
-        raise SimSetupError(f"model file {model_path!r} does not compile: {detail}") from None
-
-
-class MujocoBatchBackend(SimBackend):
+class MujocoBatchBackend(MujocoModelBackend):
     def __init__(
         self,
         model_path: str,
@@ -48,46 +33,10 @@ class MujocoBatchBackend(SimBackend):
         device: str | torch.device = "cpu",
         num_threads: int = 0,
     ):
-        if num_envs < 1:
-            raise SimSetupError(f"num_envs must be at least 1, got {num_envs}")
-        self.model = load_model(model_path)
-        m = self.model
-        self.num_envs = num_envs
         self.device = torch.device(device)
-        self.timestep = float(m.opt.timestep)
-        self.gravity = float(np.linalg.norm(m.opt.gravity))
-
-        self._base_body = _named_id(m, mujoco.mjtObj.mjOBJ_BODY, base_body, "body")
-        root_joint = m.body_jntadr[self._base_body]
-        if root_joint < 0 or m.jnt_type[root_joint] != mujoco.mjtJoint.mjJNT_FREE:
-            raise SimSetupError(f"body {base_body!r} of {model_path!r} has no free joint; a legged robot needs one")
-        self._root_qpos = int(m.jnt_qposadr[root_joint])
-        self._root_qvel = int(m.jnt_dofadr[root_joint])
-        self.robot_mass = float(m.body_subtreemass[self._base_body])
-
-        # Joints in actuator order: the task's action order is the model's actuator order.
-        if m.nu == 0:
-            raise SimSetupError(f"model {model_path!r} has no actuators")
-        joints = [int(m.actuator_trnid[i, 0]) for i in range(m.nu)]
-        self.joint_names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
-        self._joint_qpos = np.array([m.jnt_qposadr[j] for j in joints])
-        self._joint_qvel = np.array([m.jnt_dofadr[j] for j in joints])
-        self.joint_pos_limits = torch.tensor(m.jnt_range[joints], dtype=torch.float32, device=self.device)
-        self.torque_limits = torch.tensor(
-            np.abs(m.actuator_forcerange).max(axis=1), dtype=torch.float32, device=self.device
-        )
-        home = _named_id(m, mujoco.mjtObj.mjOBJ_KEY, _HOME_KEY, "keyframe")
-        self._home_key = home
-        self._home_qpos = m.key_qpos[home].copy()
-        self.default_joint_pos = torch.tensor(self._home_qpos[self._joint_qpos], dtype=torch.float32, device=self.device)
-
-        self.foot_names = tuple(foot_sensors)
-        self._foot_rows = _force_sensor_rows(m, foot_sensors)
-        self._termination_rows = _force_sensor_rows(m, termination_sensors)
-        self._ground_geom = _named_id(m, mujoco.mjtObj.mjOBJ_GEOM, ground_geom, "geom")
-
+        m = self._read_model(model_path, num_envs, foot_sensors, termination_sensors, ground_geom, base_body)
         self.batch = mujoco.batch.Batch(m, num_envs, nthread=num_threads)
-        self.batch.reset(keyframe=home)
+        self.batch.reset(keyframe=self._home_key)
         self._qpos = self.batch.bind("qpos")
         self._qvel = self.batch.bind("qvel")
         self._ctrl = self.batch.bind("ctrl")
@@ -170,7 +119,7 @@ class MujocoBatchBackend(SimBackend):
     # --- resets and perturbations ---------------------------------------------------------------
 
     def reset(self, env_ids, base_pos, base_quat, base_lin_vel, base_ang_vel, joint_pos, joint_vel) -> None:
-        ids = _as_index(env_ids)
+        ids = as_index(env_ids)
         if len(ids) == 0:
             return
         # The keyframe reset clears time, warm starts and actuator state; then the given state is written.
@@ -187,21 +136,21 @@ class MujocoBatchBackend(SimBackend):
         self._last_sensordata[ids] = 0.0
 
     def push_base(self, env_ids, delta_vel_xy) -> None:
-        ids = _as_index(env_ids)
+        ids = as_index(env_ids)
         v = self._root_qvel
         self._qvel[ids, v : v + 2] += _np(delta_vel_xy)
 
     def set_ground_friction(self, env_ids, friction) -> None:
-        ids = _as_index(env_ids)
+        ids = as_index(env_ids)
         self.batch.expand("geom_friction")[ids, self._ground_geom, 0] = _np(friction)
 
     def set_base_mass_offset(self, env_ids, added_mass) -> None:
-        ids = _as_index(env_ids)
+        ids = as_index(env_ids)
         self.batch.expand("body_mass")[ids, self._base_body] = self.model.body_mass[self._base_body] + _np(added_mass)
         self.batch.set_const(ids)  # subtree masses and the mass matrix constants follow the new mass
 
     def set_base_com_offset(self, env_ids, offset) -> None:
-        ids = _as_index(env_ids)
+        ids = as_index(env_ids)
         self.batch.expand("body_ipos")[ids, self._base_body] = self.model.body_ipos[self._base_body] + _np(offset)
         self.batch.set_const(ids)
 
@@ -211,31 +160,6 @@ class MujocoBatchBackend(SimBackend):
         if expanded is None:
             return np.full(self.num_envs, self.model.geom_friction[self._ground_geom, 0])
         return expanded[:, self._ground_geom, 0].copy()
-
-
-def _named_id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str, label: str) -> int:
-    idx = mujoco.mj_name2id(model, kind, name)
-    if idx < 0:
-        raise SimSetupError(f"the model has no {label} named {name!r}")
-    return idx
-
-
-def _force_sensor_rows(model: mujoco.MjModel, names: tuple[str, ...]) -> np.ndarray:
-    """sensordata indices (len(names), 3) of 3-D contact-force sensors."""
-    rows = []
-    for name in names:
-        sid = _named_id(model, mujoco.mjtObj.mjOBJ_SENSOR, name, "sensor")
-        if model.sensor_dim[sid] != 3:
-            raise SimSetupError(f"sensor {name!r} must give a 3-D force (contact sensor with reduce='netforce')")
-        adr = model.sensor_adr[sid]
-        rows.append(np.arange(adr, adr + 3))
-    return np.array(rows, dtype=np.int64).reshape(len(names), 3)
-
-
-def _as_index(env_ids) -> np.ndarray:
-    if isinstance(env_ids, torch.Tensor):
-        env_ids = env_ids.detach().cpu().numpy()
-    return np.asarray(env_ids, dtype=np.int64).ravel()
 
 
 def _np(values) -> np.ndarray:

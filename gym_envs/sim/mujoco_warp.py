@@ -44,14 +44,16 @@ import mujoco
 import numpy as np
 import torch
 
-from gym_envs.sim.backend import SimBackend, SimSetupError, SimState, StepResult
-from gym_envs.sim.mujoco_batch import _HOME_KEY, _as_index, _force_sensor_rows, _named_id, load_model
+from gym_envs.sim.backend import SimSetupError, SimState, StepResult
+from gym_envs.sim.mujoco_model import MujocoModelBackend, as_index
 
 try:
     import mujoco_warp as mjw
     import warp as wp
 except ImportError:
     raise SimSetupError("the 'warp' backend needs the gpu extra: pip install -e .[gpu]") from None
+
+wp.config.quiet = True  # no line per kernel module loaded; errors are still raised
 
 # A state past these is a blown-up simulation (MJWarp keeps stepping NaNs and giant numbers).
 MAX_ABS_QPOS = 1e4  # [m] or [rad]; a legged robot never gets 10 km from the origin in an episode
@@ -227,7 +229,7 @@ def _finish_step(
 # --- backend ------------------------------------------------------------------------------------
 
 
-class MujocoWarpBackend(SimBackend):
+class MujocoWarpBackend(MujocoModelBackend):
     """`num_envs` worlds of one MJWarp model; the same arguments and results as `MujocoBatchBackend`.
 
     device: where the task's tensors live. warp_device: where the simulation runs, by default
@@ -249,16 +251,11 @@ class MujocoWarpBackend(SimBackend):
         warp_device: str | None = None,
         use_cuda_graphs: bool = True,
     ):
-        if num_envs < 1:
-            raise SimSetupError(f"num_envs must be at least 1, got {num_envs}")
         self.device = torch.device(device)
         if self.device.type == "cuda" and not torch.cuda.is_available():
             raise SimSetupError(f"device {str(device)!r} asked for, but torch has no CUDA device here")
         self._wp_device = _warp_device(self.device, warp_device)
-        self.model = load_model(model_path)
-        m = self.model
-        self.num_envs = num_envs
-        _read_model_facts(self, model_path, foot_sensors, termination_sensors, ground_geom, base_body)
+        m = self._read_model(model_path, num_envs, foot_sensors, termination_sensors, ground_geom, base_body)
         _check_state_is_covered(m, model_path)
 
         # --- the Warp side
@@ -495,48 +492,11 @@ class MujocoWarpBackend(SimBackend):
     def _ids(self, env_ids) -> torch.Tensor:
         if isinstance(env_ids, torch.Tensor):  # stays on the device: no host round trip
             return env_ids.detach().to(self._view_device, torch.int64).reshape(-1)
-        return torch.as_tensor(_as_index(env_ids), device=self._view_device)
+        return torch.as_tensor(as_index(env_ids), device=self._view_device)
 
     def _values(self, values) -> torch.Tensor:
         return torch.as_tensor(values, dtype=torch.float32).to(self._view_device)
 
-
-
-def _read_model_facts(sim, model_path, foot_sensors, termination_sensors, ground_geom, base_body) -> None:
-    """The model facts and indices every backend reads from the MjModel `sim.model` (same as the CPU backend).
-
-    This mirrors the first part of MujocoBatchBackend.__init__; it can move to a shared
-    place for both backends to call.
-    """
-    m = sim.model
-    sim.timestep = float(m.opt.timestep)
-    sim.gravity = float(np.linalg.norm(m.opt.gravity))
-
-    sim._base_body = _named_id(m, mujoco.mjtObj.mjOBJ_BODY, base_body, "body")
-    root_joint = m.body_jntadr[sim._base_body]
-    if root_joint < 0 or m.jnt_type[root_joint] != mujoco.mjtJoint.mjJNT_FREE:
-        raise SimSetupError(f"body {base_body!r} of {model_path!r} has no free joint; a legged robot needs one")
-    sim._root_qpos = int(m.jnt_qposadr[root_joint])
-    sim._root_qvel = int(m.jnt_dofadr[root_joint])
-    sim.robot_mass = float(m.body_subtreemass[sim._base_body])
-
-    if m.nu == 0:
-        raise SimSetupError(f"model {model_path!r} has no actuators")
-    joints = [int(m.actuator_trnid[i, 0]) for i in range(m.nu)]
-    sim.joint_names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
-    sim._joint_qpos = np.array([m.jnt_qposadr[j] for j in joints])
-    sim._joint_qvel = np.array([m.jnt_dofadr[j] for j in joints])
-    sim.joint_pos_limits = torch.tensor(m.jnt_range[joints], dtype=torch.float32, device=sim.device)
-    sim.torque_limits = torch.tensor(np.abs(m.actuator_forcerange).max(axis=1), dtype=torch.float32, device=sim.device)
-    home = _named_id(m, mujoco.mjtObj.mjOBJ_KEY, _HOME_KEY, "keyframe")
-    sim._home_key = home
-    sim._home_qpos = m.key_qpos[home].copy()
-    sim.default_joint_pos = torch.tensor(sim._home_qpos[sim._joint_qpos], dtype=torch.float32, device=sim.device)
-
-    sim.foot_names = tuple(foot_sensors)
-    sim._foot_rows = _force_sensor_rows(m, foot_sensors)
-    sim._termination_rows = _force_sensor_rows(m, termination_sensors)
-    sim._ground_geom = _named_id(m, mujoco.mjtObj.mjOBJ_GEOM, ground_geom, "geom")
 
 
 def _warp_device(device: torch.device, warp_device: str | None):
