@@ -48,12 +48,12 @@ from gym_envs.sim.backend import SimSetupError, SimState, StepResult
 from gym_envs.sim.mujoco_model import MujocoModelBackend, as_index
 
 try:
-    import mujoco_warp as mjw
     import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING  # no line per kernel module loaded; warnings and errors still show
+    import mujoco_warp as mjw
 except ImportError:
     raise SimSetupError("the 'warp' backend needs the gpu extra: pip install -e .[gpu]") from None
-
-wp.config.quiet = True  # no line per kernel module loaded; errors are still raised
 
 # A state past these is a blown-up simulation (MJWarp keeps stepping NaNs and giant numbers).
 MAX_ABS_QPOS = 1e4  # [m] or [rad]; a legged robot never gets 10 km from the origin in an episode
