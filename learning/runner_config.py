@@ -1,0 +1,238 @@
+"""Typed PPO training configs, one per task, their rsl-rl-lib 5.x dict form, and named profiles.
+
+A train config is a dataclass tree like the env configs of gym_envs, so the same tools apply:
+`gym_envs.config.apply_overrides`, `save_yaml` and `load_yaml` (every run folder keeps a
+`train.yaml`). `to_rsl_rl_dict` turns it into the plain dict `rsl_rl.runners.OnPolicyRunner` takes.
+
+Overrides address two trees with one syntax (`split_overrides`):
+  * `train.<key>=<value>` goes to the train config, e.g. `train.algorithm.learning_rate=1e-4`;
+  * every other key goes to the env config, e.g. `env.num_envs=512` or `osc.orc=110`.
+Profiles (`PROFILES`) are named lists of such overrides, applied on top of the task defaults.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from gym_envs.config import ConfigError, apply_overrides, to_dict
+from gym_envs.registry import UnknownTaskError
+
+TRAIN_PREFIX = "train."
+
+
+@dataclass
+class AlgorithmCfg:
+    """PPO (rsl_rl.algorithms.PPO keyword arguments). Values of mini_cheetah_osc (facts §7.1, §10.11)."""
+
+    class_name: str = "PPO"
+    num_learning_epochs: int = 4
+    num_mini_batches: int = 8
+    clip_param: float = 0.2  # also the clip range of the value loss
+    gamma: float = 0.99  # 1 - 1/(1 s / 0.01 s)
+    lam: float = 0.995  # 1 - 1/(2 s / 0.01 s)
+    value_loss_coef: float = 1.0
+    entropy_coef: float = 0.02
+    learning_rate: float = 1e-5  # start value; the adaptive schedule keeps it in [1e-5, 1e-2]
+    max_grad_norm: float = 1.0
+    optimizer: str = "adam"
+    use_clipped_value_loss: bool = True
+    schedule: str = "adaptive"  # 'adaptive' (KL-driven) or 'fixed'
+    desired_kl: float = 0.01
+    normalize_advantage_per_mini_batch: bool = False
+
+
+@dataclass
+class DistributionCfg:
+    """Action distribution of the actor (rsl_rl.modules.distribution)."""
+
+    class_name: str = "GaussianDistribution"
+    init_std: float = 1.0
+    std_type: str = "scalar"  # std stored directly, as in ORCAgym; 'log' stores log-std
+
+
+@dataclass
+class ModelCfg:
+    """An rsl_rl.models.MLPModel; a distribution makes it stochastic (the actor)."""
+
+    class_name: str = "MLPModel"
+    hidden_dims: tuple[int, ...] = (256, 256, 128)
+    activation: str = "elu"
+    obs_normalization: bool = True
+    distribution_cfg: DistributionCfg | None = None
+
+
+@dataclass
+class TrainCfg:
+    """Everything about learning; the env side lives in the task's env config."""
+
+    task: str = ""  # the gym_envs task this config trains; recorded so a run folder names its task
+    seed: int = 0  # -1 draws one at start; the drawn value is what train.yaml records
+    num_steps_per_env: int = 32
+    max_iterations: int = 2000  # total PPO iterations of the run; a resumed run continues up to it
+    save_interval: int = 50  # model_<it>.pt every this many iterations (and at 0 and the end)
+    experiment_name: str = ""  # '' derives it: ORC_<orc> for oscillator tasks, else the task name
+    run_name: str = ""  # '' derives it: seed<seed>
+    init_at_random_ep_len: bool = True
+    check_for_nan: bool = True
+    obs_groups: dict[str, tuple[str, ...]] = field(
+        default_factory=lambda: {"actor": ("actor",), "critic": ("critic",)}
+    )
+    algorithm: AlgorithmCfg = field(default_factory=AlgorithmCfg)
+    actor: ModelCfg = field(default_factory=lambda: ModelCfg(distribution_cfg=DistributionCfg()))
+    critic: ModelCfg = field(default_factory=ModelCfg)
+    # Provenance, written by train.py (setting them changes nothing):
+    profile: str = ""  # the --profile the run was started with
+    resumed_from: str = ""  # checkpoint a resumed run started from
+
+
+@dataclass
+class MiniCheetahOscTrainCfg(TrainCfg):
+    """The paper's learner (ORCAgym MiniCheetahOscRunnerCfg, facts §7)."""
+
+    task: str = "mini_cheetah_osc"
+
+
+@dataclass
+class MiniCheetahTrainCfg(TrainCfg):
+    """The parent task's learner (ORCAgym MiniCheetahRunnerCfg, facts §11)."""
+
+    task: str = "mini_cheetah"
+    num_steps_per_env: int = 24
+    max_iterations: int = 1000
+    algorithm: AlgorithmCfg = field(
+        default_factory=lambda: AlgorithmCfg(
+            num_learning_epochs=6, num_mini_batches=6, entropy_coef=0.01, lam=0.99, learning_rate=1e-4
+        )
+    )
+    actor: ModelCfg = field(
+        default_factory=lambda: ModelCfg(hidden_dims=(256, 256, 256), distribution_cfg=DistributionCfg())
+    )
+    critic: ModelCfg = field(default_factory=lambda: ModelCfg(hidden_dims=(256, 256, 256)))
+
+
+TRAIN_CFGS: dict[str, type[TrainCfg]] = {
+    "mini_cheetah": MiniCheetahTrainCfg,
+    "mini_cheetah_osc": MiniCheetahOscTrainCfg,
+}
+
+
+def train_cfg_class(task: str) -> type[TrainCfg]:
+    if task not in TRAIN_CFGS:
+        raise UnknownTaskError(f"unknown task {task!r}; known tasks: {', '.join(sorted(TRAIN_CFGS))}")
+    return TRAIN_CFGS[task]
+
+
+# --- profiles ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Profile:
+    description: str
+    overrides: tuple[str, ...] = ()  # same scheme as --set: 'train.'-prefixed keys are train keys
+
+
+PROFILES: dict[str, Profile] = {
+    "paper": Profile(
+        "the released ORCAgym setup (4096 envs x 32 steps, 2000 iterations, lr 1e-5 adaptive); "
+        "these are the task defaults, so the profile changes nothing"
+    ),
+    # Placeholder guesses for a 2-core CPU machine; to be tuned (bench/).
+    "cpu_fast": Profile(
+        "fewer envs and a larger learning rate for CPU-only machines (untuned guesses)",
+        (
+            "env.num_envs=1024",
+            "train.num_steps_per_env=24",
+            "train.algorithm.learning_rate=1e-3",
+            "train.algorithm.schedule=adaptive",
+            "train.algorithm.num_learning_epochs=5",
+            "train.algorithm.num_mini_batches=4",
+        ),
+    ),
+}
+
+
+def profile_overrides(name: str | None) -> list[str]:
+    if not name:
+        return []
+    if name not in PROFILES:
+        raise ConfigError(f"unknown profile {name!r}; known profiles: {', '.join(PROFILES)}")
+    return list(PROFILES[name].overrides)
+
+
+# --- overrides --------------------------------------------------------------------------------
+
+
+def split_overrides(overrides: list[str]) -> tuple[list[str], list[str]]:
+    """(env overrides, train overrides with the 'train.' prefix removed)."""
+    env, train = [], []
+    for item in overrides:
+        if item.strip().startswith(TRAIN_PREFIX):
+            train.append(item.strip()[len(TRAIN_PREFIX) :])
+        else:
+            env.append(item)
+    return env, train
+
+
+def apply_split_overrides(env_cfg: Any, train_cfg: TrainCfg, overrides: list[str]) -> tuple[Any, TrainCfg]:
+    """Apply mixed env/train overrides; returns new configs (the inputs are not changed)."""
+    env_items, train_items = split_overrides(overrides)
+    train_fields = {f.name for f in dataclasses.fields(train_cfg)}
+    env_fields = {f.name for f in dataclasses.fields(env_cfg)}
+    for item in env_items:
+        first = item.partition("=")[0].strip().split(".")[0]
+        if first in train_fields and first not in env_fields:
+            raise ConfigError(
+                f"override {item!r} names a train config key; prefix it with 'train.' (train.{item.strip()})"
+            )
+    try:
+        train_cfg = apply_overrides(train_cfg, train_items)
+    except ConfigError as err:
+        raise ConfigError(f"train config (keys after 'train.'): {err}") from None
+    return apply_overrides(env_cfg, env_items), train_cfg
+
+
+# --- the dict rsl-rl wants --------------------------------------------------------------------
+
+
+def _rsl_rl_classes() -> dict[str, Any]:
+    from rsl_rl.algorithms import PPO
+    from rsl_rl.models import MLPModel
+    from rsl_rl.modules.distribution import GaussianDistribution
+
+    return {"PPO": PPO, "MLPModel": MLPModel, "GaussianDistribution": GaussianDistribution}
+
+
+def to_rsl_rl_dict(cfg: TrainCfg) -> dict:
+    """A fresh OnPolicyRunner train_cfg dict (rsl-rl-lib 5.5): a new one per runner, since rsl-rl mutates it.
+
+    Known class names become the classes themselves; any other name is left for rsl-rl to resolve.
+    """
+    data = to_dict(cfg)
+    classes = _rsl_rl_classes()
+
+    def resolve(block: dict) -> dict:
+        block = {k: v for k, v in block.items() if v is not None}
+        block["class_name"] = classes.get(block["class_name"], block["class_name"])
+        if isinstance(block.get("distribution_cfg"), dict):
+            block["distribution_cfg"] = resolve(block["distribution_cfg"])
+        return block
+
+    return {
+        "num_steps_per_env": data["num_steps_per_env"],
+        "save_interval": data["save_interval"],
+        "check_for_nan": data["check_for_nan"],
+        "obs_groups": {k: list(v) for k, v in data["obs_groups"].items()},
+        "algorithm": resolve(data["algorithm"]),
+        "actor": resolve(data["actor"]),
+        "critic": resolve(data["critic"]),
+        "logger": "tensorboard",
+        "experiment_name": data["experiment_name"],
+        "run_name": data["run_name"],
+    }
+
+
+def derived_experiment_name(task: str, env_cfg: Any) -> str:
+    osc = getattr(env_cfg, "osc", None)
+    return f"ORC_{osc.orc}" if osc is not None else task

@@ -1,0 +1,373 @@
+"""Run folders, checkpoints and finding them again.
+
+Layout (one folder per training run; a resumed run gets a new folder):
+
+    <log_root>/<experiment>/<YYYY-mm-dd_HH-MM-SS>_<run>/
+        env.yaml         full env config, as built (gym_envs.config.save_yaml)
+        train.yaml       full train config, including the task name and the seed
+        model_<it>.pt    checkpoints; <it> = PPO iterations completed when it was written
+        events.out.tfevents.*   tensorboard scalars, step = iteration index
+        git/             state of the repository the run was started from
+        exported/        policy.pt (TorchScript) and policy.onnx, written by play.py --export
+
+Checkpoints are written atomically (temporary file in the same folder, then os.replace) and read
+with `torch.load(weights_only=True)`: they hold only tensors, dicts, lists, numbers and strings.
+Every failure here is a `RunError` whose message is one line saying what exists.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import re
+import tempfile
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+import yaml
+
+from gym_envs.config import ConfigError
+
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DEFAULT_LOG_ROOT = os.path.join(REPO_ROOT, "logs")
+POLICY_ROOT = os.path.join(REPO_ROOT, "resources", "policies")
+ENV_YAML, TRAIN_YAML = "env.yaml", "train.yaml"
+EXPORT_DIR = "exported"
+
+_CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
+_TIMESTAMP_FORMAT = "%Y-%m-%d_%H-%M-%S"
+_TIMESTAMP_LEN = len("2000-01-01_00-00-00")
+
+
+class RunError(ConfigError):
+    """A run, checkpoint or checkpoint content that does not exist or does not fit; one line."""
+
+
+def default_log_root() -> str:
+    return os.environ.get("ORCGYM_LOG_ROOT", DEFAULT_LOG_ROOT)
+
+
+# --- creating runs ----------------------------------------------------------------------------
+
+
+def run_folder_name(run_name: str, now: datetime.datetime | None = None) -> str:
+    stamp = (now or datetime.datetime.now()).strftime(_TIMESTAMP_FORMAT)
+    return f"{stamp}_{run_name}" if run_name else stamp
+
+
+def check_folder_names(experiment: str, run_name: str) -> None:
+    if not experiment:
+        raise RunError("the experiment name is empty")
+    for name in (experiment, run_name):
+        if os.sep in name or name in (".", ".."):
+            raise RunError(f"experiment and run names must be plain folder names, got {name!r}")
+
+
+def create_run_dir(log_root: str, experiment: str, run_name: str) -> str:
+    """Make a new, empty run folder; a name taken in the same second gets a -2, -3... suffix."""
+    check_folder_names(experiment, run_name)
+    parent = os.path.join(log_root, experiment)
+    os.makedirs(parent, exist_ok=True)
+    base = run_folder_name(run_name)
+    for suffix in range(1, 1000):
+        path = os.path.join(parent, base if suffix == 1 else f"{base}-{suffix}")
+        try:
+            os.mkdir(path)
+            return path
+        except FileExistsError:
+            continue
+    raise RunError(f"cannot create a run folder under {parent}: too many runs named {base}")
+
+
+# --- checkpoints ------------------------------------------------------------------------------
+
+
+def checkpoint_path(run_dir: str, iteration: int) -> str:
+    return os.path.join(run_dir, f"model_{iteration}.pt")
+
+
+def list_checkpoints(run_dir: str) -> list[int]:
+    """Iterations of the model_<it>.pt files in run_dir, ascending."""
+    found = []
+    for name in os.listdir(run_dir):
+        m = _CHECKPOINT_RE.match(name)
+        if m:
+            found.append(int(m.group(1)))
+    return sorted(found)
+
+
+def save_checkpoint(data: dict, path: str) -> None:
+    """torch.save to a temporary file beside `path`, then os.replace: readers never see half a file."""
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            torch.save(data, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def load_checkpoint(path: str, map_location: str | torch.device | None = None) -> dict:
+    if not os.path.isfile(path):
+        raise RunError(f"checkpoint {path} does not exist")
+    try:
+        data = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as err:  # unpickling refused, truncated file, not a torch file
+        detail = " ".join(str(err).split())[:200]
+        raise RunError(f"cannot read checkpoint {path}: {type(err).__name__}: {detail}") from None
+    if not isinstance(data, dict) or "actor_state_dict" not in data:
+        raise RunError(f"{path} is not an orcgym/rsl-rl checkpoint (no actor_state_dict)")
+    return data
+
+
+def model_io_dims(state_dict: dict) -> tuple[int, int]:
+    """(input size, output size) of an MLP model's state dict: its first and last linear layers."""
+    weights = [v for k, v in state_dict.items() if k.endswith("weight") and getattr(v, "ndim", 0) == 2]
+    if not weights:
+        raise RunError("checkpoint model has no linear layers")
+    return int(weights[0].shape[1]), int(weights[-1].shape[0])
+
+
+def check_checkpoint_fits(
+    data: dict, path: str, actor_obs: int, critic_obs: int, num_actions: int, context: str, cause: str = ""
+) -> None:
+    """Raise a RunError naming the sizes if the checkpoint's networks do not fit the task's."""
+    ckpt_actor, ckpt_actions = model_io_dims(data["actor_state_dict"])
+    ckpt_critic = model_io_dims(data["critic_state_dict"])[0] if "critic_state_dict" in data else critic_obs
+    if (ckpt_actor, ckpt_critic) != (actor_obs, critic_obs):
+        hint = cause or "the observation terms differ (observations.actor/critic overrides or another task)"
+        raise RunError(
+            f"checkpoint {path} expects {ckpt_actor} actor / {ckpt_critic} critic observations but {context} gives "
+            f"{actor_obs} / {critic_obs}; likely cause: {hint}"
+        )
+    if ckpt_actions != num_actions:
+        raise RunError(f"checkpoint {path} outputs {ckpt_actions} actions but {context} has {num_actions}")
+
+
+# --- finding runs -----------------------------------------------------------------------------
+
+
+@dataclass
+class RunInfo:
+    path: str
+    experiment: str
+    name: str
+
+    def read_yaml(self, name: str) -> dict:
+        """The YAML as plain data (for filtering); {} if missing or unreadable."""
+        try:
+            with open(os.path.join(self.path, name), encoding="utf-8") as f:
+                data = yaml.safe_load(f)
+        except (OSError, yaml.YAMLError):
+            return {}
+        return data if isinstance(data, dict) else {}
+
+    @property
+    def task(self) -> str | None:
+        return self.read_yaml(TRAIN_YAML).get("task")
+
+    @property
+    def orc(self) -> str | None:
+        osc = self.read_yaml(ENV_YAML).get("osc")
+        return str(osc.get("orc")) if isinstance(osc, dict) else None
+
+    def sort_key(self) -> tuple:
+        stamp = self.name[:_TIMESTAMP_LEN]
+        try:
+            created = os.stat(os.path.join(self.path, ENV_YAML)).st_mtime_ns
+        except OSError:
+            created = 0
+        return (stamp, created, self.name)
+
+
+def is_run_dir(path: str) -> bool:
+    return os.path.isfile(os.path.join(path, ENV_YAML)) and os.path.isfile(os.path.join(path, TRAIN_YAML))
+
+
+def list_runs(log_root: str, experiment: str | None = None) -> list[RunInfo]:
+    """Run folders (those with env.yaml and train.yaml), oldest first."""
+    if not os.path.isdir(log_root):
+        return []
+    experiments = [experiment] if experiment else sorted(os.listdir(log_root))
+    runs = []
+    for exp in experiments:
+        exp_dir = os.path.join(log_root, exp)
+        if not os.path.isdir(exp_dir):
+            continue
+        for name in os.listdir(exp_dir):
+            path = os.path.join(exp_dir, name)
+            if is_run_dir(path):
+                runs.append(RunInfo(path, exp, name))
+    return sorted(runs, key=RunInfo.sort_key)
+
+
+def _describe(runs: list[RunInfo], limit: int = 8) -> str:
+    if not runs:
+        return "none"
+    names = [f"{r.experiment}/{r.name}" for r in runs[-limit:]]
+    more = f" (and {len(runs) - limit} older)" if len(runs) > limit else ""
+    return ", ".join(names) + more
+
+
+def find_run(
+    log_root: str,
+    load_run: str | None = None,
+    experiment: str | None = None,
+    task: str | None = None,
+    orc: str | None = None,
+) -> str:
+    """The run folder to load.
+
+    load_run: a path to a run folder, or the name of a run folder (searched in `experiment`, or in
+    every experiment); None or '-1' takes the newest run (that has a checkpoint) matching the
+    experiment, task and ORC filters.
+    """
+    if load_run and load_run != "-1":
+        if os.path.isdir(load_run):
+            if not is_run_dir(load_run):
+                raise RunError(f"{load_run} is not a run folder (it needs {ENV_YAML} and {TRAIN_YAML})")
+            return os.path.abspath(load_run)
+        candidates = [r for r in list_runs(log_root, experiment) if r.name == load_run]
+        if len(candidates) == 1:
+            return candidates[0].path
+        where = os.path.join(log_root, experiment) if experiment else log_root
+        if len(candidates) > 1:
+            raise RunError(
+                f"run {load_run!r} exists in several experiments under {where} "
+                f"({', '.join(r.experiment for r in candidates)}); pass --experiment_name or a path"
+            )
+        runs = [r for r in list_runs(log_root, experiment) if (task is None or r.task == task)]
+        raise RunError(f"no run {load_run!r} under {where}; existing runs: {_describe(runs)}")
+
+    runs = list_runs(log_root, experiment)
+    matching = [
+        r for r in runs
+        if (task is None or r.task == task) and (orc is None or r.orc == orc) and list_checkpoints(r.path)
+    ]
+    if not matching:
+        where = os.path.join(log_root, experiment) if experiment else log_root
+        wanted = " ".join(f for f in (f"task={task}" if task else "", f"orc={orc}" if orc else "") if f)
+        raise RunError(
+            f"no run with a checkpoint under {where}" + (f" for {wanted}" if wanted else "")
+            + f"; existing runs: {_describe(runs)}"
+        )
+    return matching[-1].path
+
+
+def find_checkpoint(run_dir: str, checkpoint: int = -1) -> str:
+    """Path of model_<checkpoint>.pt in run_dir; -1 is the highest iteration."""
+    available = list_checkpoints(run_dir)
+    if not available:
+        raise RunError(f"run {run_dir} has no checkpoints (model_<iteration>.pt)")
+    if checkpoint == -1:
+        return checkpoint_path(run_dir, available[-1])
+    if checkpoint not in available:
+        raise RunError(
+            f"run {run_dir} has no checkpoint {checkpoint}; available iterations: {', '.join(map(str, available))}"
+        )
+    return checkpoint_path(run_dir, checkpoint)
+
+
+def shipped_policy_dir(orc: str) -> str:
+    return os.path.join(POLICY_ROOT, f"ORC_{orc}")
+
+
+def one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())
+
+
+def run_task(run_dir: str) -> str | None:
+    """The task a run trained, from its train.yaml."""
+    return RunInfo(run_dir, os.path.basename(os.path.dirname(run_dir)), os.path.basename(run_dir)).task
+
+
+def load_run_configs(run_dir: str) -> tuple[str, Any, Any]:
+    """(task, env config, train config) of a run folder, rebuilt from its YAMLs."""
+    from gym_envs.config import load_yaml
+    from gym_envs.registry import env_cfg_class
+    from learning.runner_config import train_cfg_class
+
+    task = run_task(run_dir)
+    if not task:
+        raise RunError(f"{os.path.join(run_dir, TRAIN_YAML)} names no task")
+    env_cfg = load_yaml(env_cfg_class(task), os.path.join(run_dir, ENV_YAML))
+    train_cfg = load_yaml(train_cfg_class(task), os.path.join(run_dir, TRAIN_YAML))
+    return task, env_cfg, train_cfg
+
+
+class DeterministicActor:
+    """A trained actor as a callable: observation TensorDict ("actor" group) -> mean action, no grad."""
+
+    def __init__(self, model: torch.nn.Module):
+        self.model = model.eval()
+        self.device = next(model.parameters()).device
+
+    def __call__(self, obs) -> torch.Tensor:
+        with torch.inference_mode():
+            return self.model(obs.to(self.device))
+
+
+@dataclass
+class LoadedPolicy:
+    run_dir: str
+    checkpoint: str
+    iteration: int
+    task: str
+    env_cfg: Any  # as trained (env.yaml); apply evaluation overrides to a copy
+    train_cfg: Any
+    policy: DeterministicActor
+
+
+def load_policy(run_dir: str, checkpoint: int = -1, device: str | torch.device = "cpu") -> LoadedPolicy:
+    """A run's configs and its deterministic actor (normaliser included), without building an env.
+
+    The actor's input size comes from the checkpoint; the env built from `env_cfg` gives the same
+    size as long as the ORC O-bit and the observation terms are kept.
+    """
+    from rsl_rl.models import MLPModel
+    from tensordict import TensorDict
+
+    from learning.runner_config import to_rsl_rl_dict
+
+    task, env_cfg, train_cfg = load_run_configs(run_dir)
+    path = find_checkpoint(run_dir, checkpoint)
+    data = load_checkpoint(path, map_location=device)
+    in_dim, num_actions = model_io_dims(data["actor_state_dict"])
+    rsl = to_rsl_rl_dict(train_cfg)
+    groups = rsl["obs_groups"]["actor"]
+    # Dummy observations only size the model: all inputs in the first group, the others empty.
+    widths = {g: (in_dim if i == 0 else 0) for i, g in enumerate(groups)}
+    obs = TensorDict({g: torch.zeros(1, w) for g, w in widths.items()}, batch_size=[1])
+    actor_cfg = dict(rsl["actor"])
+    actor_cfg.pop("class_name")
+    model = MLPModel(obs, rsl["obs_groups"], "actor", num_actions, **actor_cfg).to(device)
+    model.load_state_dict(data["actor_state_dict"])
+    return LoadedPolicy(os.path.abspath(run_dir), path, int(data.get("iter", 0)), task, env_cfg, train_cfg,
+                        DeterministicActor(model))
+
+
+def orc_mismatch_cause(trained_env_cfg: Any, env_cfg: Any) -> str:
+    """'the ORC O-bit differs (...)' when the phase observations were switched, else ''."""
+    before = getattr(getattr(trained_env_cfg, "osc", None), "orc", None)
+    now = getattr(getattr(env_cfg, "osc", None), "orc", None)
+    if before and now and before[0] != now[0]:
+        return f"the ORC O-bit differs (the checkpoint's run used osc.orc={before}, now osc.orc={now})"
+    return ""
+
+
+def plain(value: Any) -> Any:
+    """Only types torch.load(weights_only=True) reads back: None, bool, int, float, str, lists, dicts."""
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    raise TypeError(f"{type(value).__name__} cannot go into a weights_only checkpoint")

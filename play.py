@@ -1,0 +1,398 @@
+"""Run a trained policy: tracking summary, video, interactive viewer, TorchScript/ONNX export.
+
+    python play.py                                      # newest run under logs/, newest checkpoint
+    python play.py --task mini_cheetah_osc --orc 110 --command 1.0 --coupling off --duration 20
+    python play.py --load_run 2025-01-01_12-00-00_seed3 --checkpoint 1000 --video walk.mp4 --headless
+    python play.py --export                              # writes <run>/exported/policy.pt and policy.onnx
+
+Which policy. --load_run (a run folder name or path) and --checkpoint (iteration, -1 newest)
+pick it; otherwise the newest run with a checkpoint under the log root, restricted to
+--experiment_name, --task and --orc when given. If there is none and --orc is given, the shipped
+policy in resources/policies/ORC_<orc>/ (env.yaml, train.yaml, model_*.pt) is used.
+
+What it runs. The env is rebuilt from the run's env.yaml (the task name comes from its
+train.yaml) and changed for evaluation:
+  * the command is fixed to --command VX [VY YAW] (default 1 0 0) and never resampled; a robot
+    that falls is reset with the same command; episodes never time out;
+  * observation noise, oscillator process noise and the omega/coupling jitter are 0 (--noise
+    keeps the trained values);
+  * pushes off (--pushes keeps them); friction/mass/COM randomisation off and resets to the
+    default pose at rest (--randomize keeps the trained randomisation and reset ranges);
+  * --osc_init sets the initial phases (random, trot, pace, bound, pronk, standing);
+  * --coupling off sets osc.coupling_max = 0 (the moving coupling; the ORC string is unchanged);
+    --orc, given for a run, evaluates the policy under another ORC string (its O bit must match);
+  * --set KEY=VALUE changes any other env key (e.g. --set osc.coupling_max=0.5).
+Actions are the deterministic policy mean. Every simulated second it prints the mean forward
+(body-frame x) velocity over robots, its spread across robots, the yaw rate and the falls.
+
+Output. --video FILE renders robot 0 offscreen with the scene's `track` camera (MuJoCo
+backend; MUJOCO_GL defaults to egl when there is no display). Without --headless and with a
+display, a passive MuJoCo viewer shows robot 0: arrow keys up/down change v_x by 0.5 m/s,
+left/right the yaw rate by 0.5 rad/s, comma/period v_y by 0.25 m/s; it runs until the window
+closes unless --duration is given. --export writes the TorchScript and ONNX policy (input: the
+actor observation, batch 1 for ONNX; output: actions) to <run>/exported/.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+_HAS_DISPLAY = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+if not _HAS_DISPLAY:
+    os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering; must be set before mujoco is imported
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+
+from gym_envs.config import ConfigError  # noqa: E402
+
+DEFAULT_DURATION_S = 10.0
+VIDEO_FPS = 50
+VIDEO_SIZE = (480, 640)  # height, width
+KEY_UP, KEY_DOWN, KEY_LEFT, KEY_RIGHT, KEY_COMMA, KEY_PERIOD = 265, 264, 263, 262, 44, 46
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="play.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("--task", help="task name; optional when a run is found (read from its train.yaml)")
+    p.add_argument("--orc", help="pick the newest run with this ORC string (or the shipped ORC_<orc> policy)")
+    p.add_argument("--load_run", help="run folder name (in the experiment) or path")
+    p.add_argument("--checkpoint", type=int, default=-1, help="iteration to load (-1: the newest)")
+    p.add_argument("--experiment_name", help="look for runs in this experiment only")
+    p.add_argument("--log_root", help="folder of experiments (default: $ORCGYM_LOG_ROOT or <repo>/logs)")
+    p.add_argument("--num_envs", type=int, default=50, help="robots (default 50)")
+    p.add_argument("--duration", type=float, help=f"simulated seconds (default {DEFAULT_DURATION_S:g}; "
+                   "in the viewer, until the window closes)")
+    p.add_argument("--command", type=float, nargs="+", metavar="V", default=[1.0, 0.0, 0.0],
+                   help="VX [VY YAW]: fixed body-frame command (default 1 0 0)")
+    p.add_argument("--osc_init", choices=("random", "trot", "pace", "bound", "pronk", "standing"),
+                   help="initial oscillator phases (default: the run's, i.e. random)")
+    p.add_argument("--coupling", choices=("on", "off"), help="off: osc.coupling_max=0 (default: as trained)")
+    p.add_argument("--noise", action="store_true", help="keep observation/oscillator noise and jitter")
+    p.add_argument("--pushes", action="store_true", help="keep random pushes")
+    p.add_argument("--randomize", action="store_true", help="keep domain randomisation and randomised resets")
+    p.add_argument("--seed", type=int, help="env.seed (default: the run's)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="env config override, repeatable (e.g. osc.coupling_max=0.5)")
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="task tensors and policy")
+    p.add_argument("--sim", choices=("mujoco", "warp"), help="physics backend (default: the run's)")
+    p.add_argument("--num_threads", type=int, help="CPU threads of the physics and of torch")
+    p.add_argument("--headless", action="store_true", help="never open a viewer window")
+    p.add_argument("--video", metavar="FILE.mp4", help="render robot 0 to this video")
+    p.add_argument("--export", action="store_true", help="write exported/policy.pt and policy.onnx in the run")
+    return p
+
+
+def locate_run(args, log_root: str) -> str:
+    from learning import runs
+
+    if args.load_run:
+        return runs.find_run(log_root, args.load_run, experiment=args.experiment_name)
+    try:
+        return runs.find_run(log_root, None, experiment=args.experiment_name, task=args.task, orc=args.orc)
+    except runs.RunError as err:
+        if not args.orc:
+            raise
+        shipped = runs.shipped_policy_dir(args.orc)
+        if runs.is_run_dir(shipped) and runs.list_checkpoints(shipped):
+            return shipped
+        raise runs.RunError(
+            f"{err}; no shipped policy at {shipped} either (train one: python train.py --task "
+            f"{args.task or 'mini_cheetah_osc'} --orc {args.orc})"
+        ) from None
+
+
+def evaluation_overrides(env_cfg, args) -> list[str]:
+    """The env overrides that turn the run's training env into the evaluation env."""
+    if len(args.command) not in (1, 3):
+        raise ConfigError(f"--command takes VX or VX VY YAW, got {len(args.command)} numbers")
+    vx, vy, yaw = (list(args.command) + [0.0, 0.0])[:3]
+    items = [
+        f"env.num_envs={args.num_envs}",
+        "env.episode_length_s=1.0e9",
+        "commands.resampling_time_s=1.0e9",
+        f"commands.lin_vel_x=[{vx!r}, {vx!r}]",
+        "commands.lin_vel_x_choices=[]",
+        "commands.lin_vel_x_noise=0.0",
+        f"commands.lin_vel_y=[{vy!r}, {vy!r}]",
+        f"commands.yaw_rate=[{yaw!r}, {yaw!r}]",
+        "commands.small_command_norm=0.0",
+        "commands.zero_lateral_and_yaw_prob=0.0",
+        "commands.zero_planar_prob=0.0",
+        "commands.zero_all_prob=0.0",
+    ]
+    has_osc = hasattr(env_cfg, "osc")
+    if not args.noise:
+        items.append("observations.noise_scale=0.0")
+        if has_osc:
+            items += ["osc.process_noise_std=0.0", "osc.omega_noise_std=0.0", "osc.coupling_noise_std=0.0"]
+    if not args.pushes:
+        items.append("push.enabled=false")
+    if not args.randomize:
+        items += [
+            "domain_rand.randomize_friction=false",
+            "domain_rand.randomize_base_mass=false",
+            "domain_rand.randomize_base_com=false",
+            "init_state.mode=default",
+        ]
+    if (args.osc_init or args.coupling or args.orc) and not has_osc:
+        raise ConfigError("--osc_init, --coupling and --orc need a task with oscillators")
+    if args.osc_init:
+        items.append(f"osc.init={args.osc_init}")
+    if args.coupling == "off":
+        items.append("osc.coupling_max=0.0")
+    if args.orc:
+        items.append(f"osc.orc={args.orc}")
+    if args.seed is not None:
+        items.append(f"env.seed={args.seed}")
+    if args.sim:
+        items.append(f"sim.backend={args.sim}")
+    if args.num_threads is not None:
+        items.append(f"sim.num_threads={args.num_threads}")
+    items.append(f"env.device={args.device}")
+    return items
+
+
+class Session:
+    """The loaded policy and its evaluation env."""
+
+    def __init__(self, args):
+        import torch
+
+        from gym_envs import make_env
+        from gym_envs.config import apply_overrides
+        from gym_envs.orc import parse_orc
+        from learning import runs
+        from learning.runner import TaskRunner
+        from learning.vec_env import TaskVecEnv
+
+        if any(item.strip().startswith("train.") for item in args.overrides):
+            raise ConfigError("play.py takes env overrides only; train.* keys have no effect here")
+        if args.device == "cuda" and not torch.cuda.is_available():
+            raise ConfigError("--device cuda, but torch sees no CUDA device")
+        log_root = args.log_root or runs.default_log_root()
+        self.run_dir = locate_run(args, log_root)
+        self.checkpoint = runs.find_checkpoint(self.run_dir, args.checkpoint)
+        saved_task, trained_env, train_cfg = runs.load_run_configs(self.run_dir)
+        if args.task and args.task != saved_task:
+            raise ConfigError(f"run {self.run_dir} trained task {saved_task!r}, not {args.task!r}")
+        self.task_name = saved_task
+        env_cfg = apply_overrides(trained_env, evaluation_overrides(trained_env, args) + list(args.overrides))
+        self.orc = getattr(getattr(env_cfg, "osc", None), "orc", None)
+        if self.orc is not None:
+            orc = parse_orc(self.orc)
+            if args.coupling == "on" and not orc.coupling:
+                print(f"note: ORC {self.orc} has C=0, so the coupling stays 0; pass --orc with C=1 to couple")
+        self.env_cfg = env_cfg
+        self.env = TaskVecEnv(make_env(saved_task, env_cfg), device=args.device)
+        self.runner = TaskRunner(self.env, train_cfg, log_dir=None, device=args.device)
+        self.runner.load(self.checkpoint, load_cfg={"actor": True}, context=f"task {saved_task} as configured",
+                         cause=runs.orc_mismatch_cause(trained_env, env_cfg))
+        self.policy = self.runner.get_inference_policy(args.device)
+
+    @property
+    def task(self):
+        return self.env.task
+
+    def set_command(self, vx: float, vy: float, yaw: float) -> None:
+        """Change the fixed command of every robot (also what a reset draws)."""
+        c = self.task.cfg.commands
+        c.lin_vel_x, c.lin_vel_y, c.yaw_rate = (vx, vx), (vy, vy), (yaw, yaw)
+        self.task.commands[:] = self.task.commands.new_tensor([vx, vy, yaw])
+
+
+class Tracker:
+    """Per-second tracking summary over all robots."""
+
+    def __init__(self, dt: float, num_envs: int):
+        import torch
+
+        self.steps_per_window = max(1, round(1.0 / dt))
+        self.dt = dt
+        self.vx = torch.zeros(num_envs)
+        self.yaw = torch.zeros(num_envs)
+        self.n = 0
+        self.falls = 0
+        self.total_falls = 0
+        self.time = 0.0
+        self.history: list[float] = []
+        print(f"{'t [s]':>7} {'cmd vx':>7} {'vx mean':>8} {'vx std':>7} {'yaw rate':>9} {'falls':>6} {'total':>6}")
+
+    def record(self, task) -> None:
+        self.vx += task.base_lin_vel[:, 0].detach().cpu()
+        self.yaw += task.base_ang_vel[:, 2].detach().cpu()
+        fell = int(task.terminated.sum())
+        self.falls += fell
+        self.total_falls += fell
+        self.n += 1
+        self.time += self.dt
+        if self.n == self.steps_per_window:
+            self.flush(task)
+
+    def flush(self, task) -> None:
+        if self.n == 0:
+            return
+        vx, yaw = self.vx / self.n, self.yaw / self.n
+        cmd = float(task.commands[:, 0].mean())
+        self.history.append(float(vx.mean()))
+        print(f"{self.time:7.2f} {cmd:7.2f} {float(vx.mean()):8.3f} {float(vx.std(unbiased=False)):7.3f} "
+              f"{float(yaw.mean()):9.3f} {self.falls:6d} {self.total_falls:6d}", flush=True)
+        self.vx.zero_()
+        self.yaw.zero_()
+        self.n = self.falls = 0
+
+
+class VideoRecorder:
+    def __init__(self, session: Session, path: str):
+        import imageio
+        import mujoco
+
+        sim = session.task.sim
+        if not hasattr(sim, "batch"):
+            raise ConfigError("--video needs the 'mujoco' backend (pass --sim mujoco)")
+        self.mujoco = mujoco
+        self.batch = sim.batch
+        self.model = self.batch.get_model(0)
+        self.data = mujoco.MjData(self.model)
+        height = min(VIDEO_SIZE[0], self.model.vis.global_.offheight)
+        width = min(VIDEO_SIZE[1], self.model.vis.global_.offwidth)
+        try:
+            self.renderer = mujoco.Renderer(self.model, height, width)
+        except Exception as err:  # no usable OpenGL platform
+            gl = os.environ.get("MUJOCO_GL", "(unset)")
+            raise ConfigError(f"offscreen rendering failed with MUJOCO_GL={gl} ({' '.join(str(err).split())}); "
+                              f"try MUJOCO_GL=egl or MUJOCO_GL=osmesa") from None
+        self.every = max(1, round(1.0 / (session.env.dt * VIDEO_FPS)))
+        fps = 1.0 / (session.env.dt * self.every)
+        self.path = path
+        self.writer = imageio.get_writer(path, fps=fps, macro_block_size=8)
+        self.frames = 0
+
+    def capture(self, step: int) -> None:
+        if step % self.every:
+            return
+        self.batch.get_data(0, self.data)
+        self.mujoco.mj_forward(self.model, self.data)
+        self.renderer.update_scene(self.data, camera="track")
+        self.writer.append_data(self.renderer.render())
+        self.frames += 1
+
+    def close(self) -> None:
+        self.writer.close()
+        self.renderer.close()
+
+
+class Viewer:
+    """Passive MuJoCo viewer of robot 0; arrow keys change the command."""
+
+    def __init__(self, session: Session, command: list[float]):
+        import mujoco
+        import mujoco.viewer
+
+        self.mujoco, self.session = mujoco, session
+        self.batch = session.task.sim.batch
+        self.model = self.batch.get_model(0)
+        self.data = mujoco.MjData(self.model)
+        self.command = list(command)
+        self.pending = None
+        self.handle = mujoco.viewer.launch_passive(self.model, self.data, key_callback=self._key)
+        print("viewer: up/down v_x +-0.5, left/right yaw rate +-0.5, comma/period v_y +-0.25; close the window to stop")
+
+    def _key(self, keycode: int) -> None:
+        steps = {KEY_UP: (0, 0.5), KEY_DOWN: (0, -0.5), KEY_LEFT: (2, 0.5), KEY_RIGHT: (2, -0.5),
+                 KEY_COMMA: (1, 0.25), KEY_PERIOD: (1, -0.25)}
+        if keycode in steps:
+            axis, delta = steps[keycode]
+            self.command[axis] = round(self.command[axis] + delta, 3)
+            self.pending = tuple(self.command)
+
+    def running(self) -> bool:
+        return self.handle.is_running()
+
+    def update(self) -> None:
+        if self.pending is not None:
+            command, self.pending = self.pending, None
+            self.session.set_command(*command)
+            print(f"command: v_x {command[0]:+.2f}  v_y {command[1]:+.2f}  yaw {command[2]:+.2f}", flush=True)
+        self.batch.get_data(0, self.data)
+        self.mujoco.mj_forward(self.model, self.data)
+        self.handle.sync()
+
+    def close(self) -> None:
+        self.handle.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    import torch
+
+    from gym_envs.sim import SimSetupError
+    from learning import runs
+
+    threads_before = torch.get_num_threads()
+    video = viewer = None
+    try:
+        if args.num_threads:
+            torch.set_num_threads(args.num_threads)
+        try:
+            session = Session(args)
+            if args.video:
+                video = VideoRecorder(session, args.video)
+        except (ConfigError, SimSetupError) as err:
+            print(f"play.py: error: {runs.one_line(err)}", file=sys.stderr)
+            return 1
+        print(f"policy {session.checkpoint} | task {session.task_name}"
+              + (f" (ORC {session.orc})" if session.orc else "") + f" | {session.env.num_envs} robots")
+        if args.export:
+            jit_path, onnx_path = session.runner.export(os.path.join(session.run_dir, runs.EXPORT_DIR))
+            print(f"exported {jit_path} and {onnx_path}")
+
+        interactive = not args.headless and _HAS_DISPLAY and video is None
+        if interactive:
+            viewer = Viewer(session, (list(args.command) + [0.0, 0.0])[:3])
+        elif not args.headless and not _HAS_DISPLAY and video is None:
+            print("no display: running without a viewer")
+        duration = args.duration if args.duration is not None else (None if interactive else DEFAULT_DURATION_S)
+        dt = session.env.dt
+        steps = None if duration is None else max(0, round(duration / dt))
+        tracker = Tracker(dt, session.env.num_envs)
+        obs = session.env.get_observations()
+        step = 0
+        wall_start = time.perf_counter()
+        try:
+            while steps is None or step < steps:
+                if viewer is not None and not viewer.running():
+                    break
+                with torch.inference_mode():
+                    obs, _, _, _ = session.env.step(session.policy(obs))
+                tracker.record(session.task)
+                if video is not None:
+                    video.capture(step)
+                if viewer is not None:
+                    viewer.update()
+                    lag = wall_start + (step + 1) * dt - time.perf_counter()
+                    if lag > 0:
+                        time.sleep(lag)
+                step += 1
+        except KeyboardInterrupt:
+            print("interrupted")
+        tracker.flush(session.task)
+        if tracker.history:
+            print(f"mean forward velocity {sum(tracker.history) / len(tracker.history):.3f} m/s over "
+                  f"{step * dt:.2f} s; {tracker.total_falls} falls")
+        if video is not None:
+            print(f"video {args.video}: {video.frames} frames")
+        return 0
+    finally:
+        if video is not None:
+            video.close()
+        if viewer is not None:
+            viewer.close()
+        torch.set_num_threads(threads_before)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,225 @@
+"""train.py and play.py end to end: mostly in-process through main(argv), two checks in subprocesses."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+import play
+import train
+from learning import runs
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FAST = ["--num_envs", "32", "--num_threads", "1", "--set", "train.num_steps_per_env=8"]
+
+
+def run_train(root, *args):
+    return train.main(["--task", "mini_cheetah_osc", "--log_root", str(root), "--headless", *FAST, *args])
+
+
+def only_run(root, experiment="ORC_111"):
+    (name,) = os.listdir(os.path.join(root, experiment))
+    return os.path.join(root, experiment, name)
+
+
+def snapshot(root):
+    """Every file under root with its size and mtime: to show nothing was written or replaced."""
+    out = {}
+    for dirpath, _, files in os.walk(root):
+        for f in files:
+            st = os.stat(os.path.join(dirpath, f))
+            out[os.path.join(dirpath, f)] = (st.st_size, st.st_mtime_ns)
+    return out
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """One 2-iteration run of 32 envs, shared by the tests that only read it."""
+    root = tmp_path_factory.mktemp("logs")
+    assert run_train(root, "--max_iterations", "2", "--seed", "1") == 0
+    return root, only_run(root)
+
+
+def test_training_writes_configs_checkpoints_and_events(trained):
+    root, run = trained
+    files = os.listdir(run)
+    assert {"env.yaml", "train.yaml", "model_0.pt", "model_2.pt"} <= set(files)
+    assert any(f.startswith("events.out.tfevents") for f in files)
+    assert os.path.basename(run).endswith("_seed1")
+    text = open(os.path.join(run, "train.yaml")).read()
+    assert "task: mini_cheetah_osc" in text and "seed: 1" in text and "num_steps_per_env: 8" in text
+    env_text = open(os.path.join(run, "env.yaml")).read()
+    assert "num_envs: 32" in env_text and "seed: 1" in env_text and "orc: '111'" in env_text
+    assert torch.load(os.path.join(run, "model_2.pt"), weights_only=True)["iter"] == 2
+
+
+def _scalars(run_dir, tag):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(run_dir)
+    acc.Reload()
+    return [e.step for e in acc.Scalars(tag)]
+
+
+def test_resume_continues_the_iteration_count_in_a_new_run(trained, tmp_path, capsys):
+    root, run = trained
+    before = snapshot(root)
+    assert train.main(["--resume", "--load_run", run, "--log_root", str(tmp_path), "--max_iterations", "4",
+                       "--num_threads", "1"]) == 0
+    assert re.search(r"\bit 3/4 ", capsys.readouterr().out)
+    assert snapshot(root) == before  # the resumed run is left alone
+    new = only_run(tmp_path)
+    assert runs.list_checkpoints(new) == [4]
+    assert torch.load(os.path.join(new, "model_4.pt"), weights_only=True)["iter"] == 4
+    assert f"resumed_from: {os.path.join(run, 'model_2.pt')}" in open(os.path.join(new, "train.yaml")).read()
+    assert _scalars(run, "Loss/value") == [0, 1]
+    assert _scalars(new, "Loss/value") == [2, 3]
+    assert _scalars(new, "Perf/env_steps_per_s") == [2, 3]
+
+
+def test_same_seed_same_weights_other_seed_other_weights(trained, tmp_path):
+    _, run = trained
+    assert run_train(tmp_path, "--max_iterations", "2", "--seed", "1") == 0
+    a = torch.load(os.path.join(run, "model_2.pt"), weights_only=True)
+    b = torch.load(os.path.join(only_run(tmp_path), "model_2.pt"), weights_only=True)
+    for part in ("actor_state_dict", "critic_state_dict"):
+        assert a[part].keys() == b[part].keys()
+        for key in a[part]:
+            assert torch.equal(a[part][key], b[part][key]), key
+    initial = torch.load(os.path.join(run, "model_0.pt"), weights_only=True)
+    assert not torch.equal(a["actor_state_dict"]["mlp.0.weight"], initial["actor_state_dict"]["mlp.0.weight"])
+    other_root = tmp_path / "other_seed"
+    assert run_train(other_root, "--max_iterations", "1", "--seed", "2") == 0
+    other = torch.load(os.path.join(only_run(other_root), "model_0.pt"), weights_only=True)
+    assert not torch.equal(other["actor_state_dict"]["mlp.0.weight"], initial["actor_state_dict"]["mlp.0.weight"])
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+def test_play_exports_torchscript_and_onnx_that_agree(trained, capsys):
+    import onnxruntime
+
+    root, run = trained
+    assert play.main(["--log_root", str(root), "--headless", "--export", "--num_envs", "4", "--duration", "0.2",
+                      "--num_threads", "1", "--command", "1.0", "--osc_init", "trot", "--coupling", "off"]) == 0
+    out = capsys.readouterr().out
+    assert "mean forward velocity" in out
+    jit_path, onnx_path = (os.path.join(run, "exported", f) for f in ("policy.pt", "policy.onnx"))
+    assert sorted(os.listdir(os.path.join(run, "exported"))) == ["policy.onnx", "policy.pt"]
+
+    session = play.Session(play.build_parser().parse_args(["--load_run", run, "--num_envs", "2", "--log_root",
+                                                             str(root)]))
+    obs = torch.randn(5, 53) * 2
+    with torch.inference_mode():
+        from tensordict import TensorDict
+
+        reference = session.policy(TensorDict({"actor": obs, "critic": torch.zeros(5, 61)}, batch_size=[5])).numpy()
+    jit = torch.jit.load(jit_path)
+    np.testing.assert_allclose(jit(obs).detach().numpy(), reference, atol=1e-5, rtol=0)
+    sess = onnxruntime.InferenceSession(onnx_path)
+    name = sess.get_inputs()[0].name
+    onnx_out = np.concatenate([sess.run(None, {name: obs[i : i + 1].numpy()})[0] for i in range(5)])
+    np.testing.assert_allclose(onnx_out, reference, atol=1e-5, rtol=0)
+
+
+def test_play_evaluation_settings(trained):
+    root, run = trained
+    args = play.build_parser().parse_args(["--load_run", run, "--log_root", str(root), "--num_envs", "3",
+                                           "--command", "2", "0.5", "-1", "--coupling", "off"])
+    session = play.Session(args)
+    cfg = session.task.cfg
+    assert cfg.observations.noise_scale == 0 and cfg.osc.process_noise_std == 0 and cfg.osc.omega_noise_std == 0
+    assert not cfg.push.enabled and not cfg.domain_rand.randomize_friction and cfg.osc.coupling_max == 0
+    assert cfg.osc.orc == "111" and session.task.max_episode_length > 10**6
+    assert torch.equal(session.task.commands, torch.tensor([[2.0, 0.5, -1.0]] * 3))
+
+
+def _assert_one_line_error(capsys, code, pattern):
+    err = capsys.readouterr().err.strip()
+    assert code == 1
+    assert "\n" not in err, err
+    assert re.search(pattern, err), err
+
+
+@pytest.mark.parametrize(
+    "argv, pattern",
+    [
+        (["--task", "nope"], r"^train\.py: error: unknown task 'nope'"),
+        (["--task", "mini_cheetah_osc", "--orc", "12"], r"malformed ORC string '12'"),
+        (["--task", "mini_cheetah_osc", "--set", "env.num_env=3"], r"did you mean 'env.num_envs'"),
+        (["--task", "mini_cheetah_osc", "--set", "train.algorithm.lr=3"], r"unknown config key 'algorithm.lr'"),
+        (["--task", "mini_cheetah_osc", "--set", "algorithm.gamma=0.9"], r"prefix it with 'train.'"),
+        (["--resume", "--load_run", "missing_run"], r"no run 'missing_run' under .* existing runs: ORC_111/"),
+        (["--resume", "--checkpoint", "7"], r"has no checkpoint 7; available iterations: 0, 2"),
+        (["--resume", "--orc", "011", "--load_run", "RUN", "--max_iterations", "9"],
+         r"expects 53 actor / 61 critic observations but .* gives 45 / 49; likely cause: the ORC O-bit differs"),
+    ],
+)
+def test_train_bad_inputs(trained, capsys, argv, pattern):
+    root, run = trained
+    argv = [run if a == "RUN" else a for a in argv]
+    before = snapshot(root)
+    code = train.main([*argv, "--log_root", str(root), "--num_threads", "1"])
+    _assert_one_line_error(capsys, code, pattern)
+    assert snapshot(root) == before
+    assert os.listdir(root) == ["ORC_111"] and len(os.listdir(os.path.join(root, "ORC_111"))) == 1
+
+
+@pytest.mark.parametrize(
+    "argv, pattern",
+    [
+        (["--task", "nope"], r"^play\.py: error: .*task=nope"),
+        (["--load_run", "missing_run"], r"no run 'missing_run'"),
+        (["--checkpoint", "99"], r"has no checkpoint 99; available iterations: 0, 2"),
+        (["--set", "osc.coupling_mx=0"], r"did you mean 'osc.coupling_max'"),
+        (["--orc", "011", "--load_run", "RUN"], r"expects 53 actor .* gives 45 / 49; likely cause: the ORC O-bit"),
+        (["--orc", "010"], r"no run with a checkpoint .* orc=010.* no shipped policy at .*ORC_010"),
+    ],
+)
+def test_play_bad_inputs(trained, capsys, argv, pattern):
+    root, run = trained
+    argv = [run if a == "RUN" else a for a in argv]
+    before = snapshot(root)
+    code = play.main([*argv, "--log_root", str(root), "--headless", "--export", "--num_envs", "2"])
+    _assert_one_line_error(capsys, code, pattern)
+    assert snapshot(root) == before
+
+
+def test_ctrl_c_saves_a_checkpoint_and_exits_130(tmp_path):
+    cmd = [sys.executable, "-u", "train.py", "--task", "mini_cheetah_osc", "--log_root", str(tmp_path),
+           "--max_iterations", "1000", "--num_envs", "16", "--num_threads", "1", "--set", "train.num_steps_per_env=4"]
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if re.search(r"\bit +2/1000", line):
+            proc.send_signal(signal.SIGINT)
+            break
+    out = "".join(lines) + proc.communicate(timeout=60)[0]
+    assert proc.returncode == 130, out
+    run = only_run(tmp_path)
+    last = runs.list_checkpoints(run)[-1]
+    assert last >= 2 and f"stopped at iteration {last}" in out
+    assert torch.load(runs.checkpoint_path(run, last), weights_only=True)["iter"] == last
+    assert not [f for f in os.listdir(run) if f.endswith(".tmp")]
+
+
+def test_play_video_headless(trained, tmp_path):
+    root, _ = trained
+    video = tmp_path / "robot0.mp4"
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run(
+        [sys.executable, "play.py", "--log_root", str(root), "--headless", "--num_envs", "2", "--duration", "0.3",
+         "--num_threads", "1", "--video", str(video)],
+        cwd=REPO, capture_output=True, text=True, env=env, timeout=120,
+    )
+    if proc.returncode and "offscreen rendering failed" in proc.stderr:
+        pytest.skip(proc.stderr.strip())
+    assert proc.returncode == 0, proc.stderr
+    assert "video" in proc.stdout and video.stat().st_size > 0
