@@ -1,0 +1,84 @@
+"""Shared figure style of the analysis modules: paper column widths, fonts, colours, saving.
+
+The style is applied in a context (`paper_style()`), never at import, so importing an analysis
+module does not change anyone else's matplotlib settings. Figures are written as PNG (for a quick
+look) and PDF (for the paper, fonts embedded as TrueType).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+COLUMN_WIDTH = 3.5  # in, one IEEE column
+WIDE_WIDTH = 7.0  # in, both columns
+
+LEG_NAMES = ("RF", "LF", "RH", "LH")
+LEG_COLORS = ("tab:red", "tab:blue", "tab:orange", "tab:cyan")
+
+# Order of the paper's Table I; 111 and 110 get the strong colours of the released entropy plots.
+CONFIG_ORDER = ("000", "100", "101", "010", "110", "011", "111")
+CONFIG_COLORS = {
+    "000": "cornflowerblue",
+    "100": "yellowgreen",
+    "101": "tab:brown",
+    "010": "mediumpurple",
+    "110": "goldenrod",
+    "011": "tab:cyan",
+    "111": "crimson",
+}
+
+GAIT_COLORS = {
+    "trot": "tab:blue",
+    "pace": "tab:green",
+    "bound": "tab:orange",
+    "pronk": "tab:purple",
+    "transition": "0.75",
+}
+
+_STYLE = {
+    "font.size": 7,
+    "axes.titlesize": 7,
+    "axes.labelsize": 7,
+    "legend.fontsize": 6,
+    "xtick.labelsize": 6,
+    "ytick.labelsize": 6,
+    "axes.linewidth": 0.6,
+    "lines.linewidth": 1.0,
+    "pdf.fonttype": 42,
+    "ps.fonttype": 42,
+    "savefig.dpi": 300,
+}
+
+
+def config_color(orc: str) -> str:
+    return CONFIG_COLORS.get(orc, "0.4")
+
+
+def sort_configs(configs) -> list[str]:
+    """Paper order first (Table I), anything else after it, alphabetically."""
+    configs = set(configs)
+    known = [c for c in CONFIG_ORDER if c in configs]
+    return known + sorted(configs - set(CONFIG_ORDER))
+
+
+@contextlib.contextmanager
+def paper_style():
+    with plt.rc_context(_STYLE):
+        yield
+
+
+def save_figure(fig, out_dir, stem: str, dpi: int = 300) -> dict[str, Path]:
+    """Write <stem>.png and <stem>.pdf into out_dir, close the figure, return both paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"png": out / f"{stem}.png", "pdf": out / f"{stem}.pdf"}
+    fig.savefig(paths["png"], dpi=dpi)
+    fig.savefig(paths["pdf"])
+    plt.close(fig)
+    return paths

@@ -1,0 +1,326 @@
+"""All figures, CSVs and Table I of the paper from a folder of trained runs, with report.md beside the paper.
+
+Runs are grouped by their ORC configuration (osc.orc of each run's env.yaml). Without --runs the
+shipped policies (resources/policies/ORC_<xyz>/) are used. --quick uses the reduced sizes of every
+module (a smoke test of the pipeline: its numbers are not comparable with the paper's).
+
+Usage: python -m analysis.report --runs DIR --out DIR [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from analysis import balanced_legs, disturbance, fixed_points, gait_emergence, pace_to_trot
+from analysis.plotting import LEG_NAMES, sort_configs
+from analysis.rollout import (
+    DEFAULT_TASK,
+    EvalSettings,
+    add_cli_args,
+    eval_overrides,
+    group_by_orc,
+    runs_from_args,
+)
+
+# Paper Table I (protocol §10): failure rate [%], mean ± std over 10 policies; (mean, std, bold).
+PAPER_TABLE_I = {
+    1.5: {"000": (0.0, 0.0, True), "100": (0.0, 0.0, True), "101": (0.1, 0.2, False), "010": (0.0, 0.0, True),
+          "110": (0.0, 0.0, True), "011": (0.0, 0.0, True), "111": (0.0, 0.0, True)},
+    2.0: {"000": (1.7, 2.5, False), "100": (4.1, 5.2, False), "101": (0.9, 1.2, False), "010": (0.0, 0.0, True),
+          "110": (0.0, 0.1, False), "011": (0.0, 0.0, True), "111": (0.0, 0.1, False)},
+    2.5: {"000": (11.0, 13.0, False), "100": (10.6, 9.1, False), "101": (7.2, 6.3, False), "010": (0.7, 0.7, False),
+          "110": (0.7, 1.0, False), "011": (0.3, 0.4, True), "111": (0.4, 0.4, False)},
+    3.0: {"000": (16.3, 12.4, False), "100": (17.5, 8.9, False), "101": (16.0, 10.2, False),
+          "010": (3.2, 3.0, False), "110": (4.1, 3.6, False), "011": (3.2, 3.1, False), "111": (2.2, 1.7, True)},
+    3.5: {"000": (25.0, 13.5, False), "100": (29.7, 12.7, False), "101": (24.0, 17.1, False),
+          "010": (10.6, 8.0, False), "110": (13.8, 7.8, False), "011": (13.1, 9.2, False), "111": (7.4, 4.0, True)},
+}
+PAPER_CONFIGS = ("000", "100", "101", "010", "110", "011", "111")
+PAPER_SETTLING = {"111_sigma1": "≈ 10 s", "110_sigma1": "nearly 40 s", "111_sigma0": "no convergence"}
+PAPER_FINAL_GAITS = {
+    "111_sigma0": "final ≈ initial (tracks its initial phases); uniform RPDs give ≈ 46 % Transition",
+    "111_sigma1": "mostly trot and pronk in tight clusters (fig. caption: trot and bound)",
+    "110_sigma1": "some convergence around trot, more spread out than ORC(111)",
+}
+# Analytic fixed points at GRF = 0.25, omega = 1 Hz (protocol §7).
+EXPECTED_FIXED_POINTS = {
+    "sigma4_xi1": "π/2 unstable, 3π/2 = 4.712 stable",
+    "sigma4_xi0": "0 ≡ 2π marginal",
+    "sigma8_xi0": "stable at 5.236",
+    "sigma16_xi0": "stable at 4.965",
+    "moving_1mps": "none",
+}
+
+
+# --- formatting -----------------------------------------------------------------------------------
+
+
+def markdown_table(header, rows) -> str:
+    """A GitHub markdown table; cells are str()-ed and '|' inside a cell is escaped."""
+    def cell(v):
+        return str(v).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(cell(h) for h in header) + " |", "|" + "---|" * len(header)]
+    for row in rows:
+        if len(row) != len(header):
+            raise ValueError(f"row {row!r} has {len(row)} cells for {len(header)} columns")
+        lines.append("| " + " | ".join(cell(v) for v in row) + " |")
+    return "\n".join(lines)
+
+
+def paper_table_markdown() -> str:
+    """Table I as printed in the paper (bold entries as there)."""
+    rows = []
+    for m, cells in PAPER_TABLE_I.items():
+        row = [f"{m:.1f}"]
+        for c in PAPER_CONFIGS:
+            mean, std, bold = cells[c]
+            text = f"{mean:.1f} ± {std:.1f}"
+            row.append(f"**{text}**" if bold else text)
+        rows.append(row)
+    return markdown_table(["Impulse [m/s]", *PAPER_CONFIGS], rows)
+
+
+def _fmt(x, digits: int = 2, unit: str = "") -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "–"
+    return f"{x:.{digits}f}{unit}"
+
+
+def _shares(fractions: dict) -> str:
+    items = sorted(fractions.items(), key=lambda kv: -kv[1])
+    return ", ".join(f"{g} {100 * p:.0f} %" for g, p in items if p > 0) or "–"
+
+
+def _git_commit() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10,
+                             cwd=Path(__file__).resolve().parent)
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+# --- claims checked on our numbers ----------------------------------------------------------------
+
+
+def table_claims(stats: dict) -> list[str]:
+    """The paper's two Table I claims, evaluated on stats[config][magnitude] = (mean, std, n)."""
+    lines = []
+    configs = list(stats)
+    magnitudes = sorted({m for c in configs for m in stats[c]})
+    large = [m for m in magnitudes if m >= 3.0]
+    if "111" in stats and len(configs) > 1 and large:
+        for m in large:
+            means = {c: stats[c][m][0] for c in configs}
+            best = min(means.values())
+            lowest = [c for c, v in means.items() if np.isclose(v, best, rtol=0, atol=1e-9)]
+            verdict = "yes" if "111" in lowest else "no"
+            lines.append(f"ORC(111) lowest at {m:g} m/s (paper: yes): {verdict}; lowest here "
+                         f"{', '.join(lowest)} at {best:.1f} %, ORC(111) {means['111']:.1f} %")
+    reward = [c for c in ("010", "011") if c in stats]
+    obs = [c for c in ("100", "101") if c in stats]
+    if reward and obs:
+        for m in [m for m in magnitudes if m >= 2.5]:
+            r = float(np.mean([stats[c][m][0] for c in reward]))
+            o = float(np.mean([stats[c][m][0] for c in obs]))
+            verdict = "yes" if r < o else "no"
+            lines.append(f"phase reward alone ({'/'.join(reward)}) fails less than phase observation alone "
+                         f"({'/'.join(obs)}) at {m:g} m/s (paper: yes): {verdict}; {r:.1f} % vs {o:.1f} %")
+    return lines
+
+
+# --- the report -----------------------------------------------------------------------------------
+
+
+def build(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
+          source: str = "", progress: bool = True) -> dict:
+    """Run every analysis on `policies` (PolicyRun list) and write the figures, CSVs and report.md."""
+    policies = [p for p in policies if p.task == DEFAULT_TASK]
+    if not policies:
+        raise ValueError(f"no {DEFAULT_TASK} runs (env.yaml with osc.orc) to analyse")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    started = datetime.datetime.now()
+
+    fp = fixed_points.run(out, quick=quick)
+    bl = balanced_legs.run(policies, out, quick, settings, seed, progress=progress)
+    collected = gait_emergence.collect(policies, quick, settings, seed, progress=progress)
+    ge = gait_emergence.run(policies, out, quick, settings, seed, collected=collected)
+    if "111_sigma1" in collected:
+        _, policy, rollout = collected["111_sigma1"]
+        pt = pace_to_trot.run(policies, out, quick, settings, seed, source=(policy, rollout))
+    else:
+        pt = {"files": {}, "skipped": "no ORC(111) policy among the runs"}
+    del collected
+    db = disturbance.run(policies, out, quick, settings, seed, progress=progress)
+
+    results = {"fixed_points": fp, "balanced_legs": bl, "gait_emergence": ge, "pace_to_trot": pt,
+               "disturbance": db}
+    text = render(policies, results, quick, settings, seed, source, started)
+    report_path = out / "report.md"
+    report_path.write_text(text)
+    results["report"] = report_path
+    return results
+
+
+def render(policies, results: dict, quick: bool, settings: EvalSettings, seed: int, source: str,
+           started: datetime.datetime) -> str:
+    groups = group_by_orc(policies)
+    configs = sort_configs(groups)
+    bl, ge, pt, db, fp = (results[k] for k in ("balanced_legs", "gait_emergence", "pace_to_trot", "disturbance",
+                                               "fixed_points"))
+    minutes = (datetime.datetime.now() - started).total_seconds() / 60
+    md = ["# orcgym analysis report", ""]
+    if quick:
+        md += ["> **Quick mode**: reduced sizes (see each section). This checks the pipeline; its numbers are "
+               "not comparable with the paper's.", ""]
+    md += [
+        f"- Policies: {source or 'given programmatically'}; "
+        + ", ".join(f"ORC({c}) × {len(groups[c])}" for c in configs),
+        f"- Evaluation: {settings.describe()}; deterministic actions; seed {seed}; commit {_git_commit()}; "
+        f"{started:%Y-%m-%d %H:%M}, {minutes:.1f} min",
+        "- Evaluation overrides applied to each run's env.yaml (protocol §1.6): `"
+        + " ".join(eval_overrides(settings, "111")) + "`",
+        "- Falls: a robot's `terminated` flag (trunk contact > 1 N); it is then reset standing with a zero command.",
+        "- Touchdowns (gait sections): contact-based, GRF > 0.1 body weight, 0.1 s debounce; RPD averaged "
+        "(circular mean) over the last two complete RF cycles at each 5 s checkpoint; Transition beyond a "
+        "wrapped distance of 2 (analysis/gait.py).",
+        "",
+    ]
+    md += _section_balanced(bl)
+    md += _section_emergence(ge)
+    md += _section_pace(pt)
+    md += _section_disturbance(db)
+    md += _section_fixed_points(fp)
+    md += ["## Files", ""]
+    for name, res in results.items():
+        for key, path in res.get("files", {}).items():
+            md.append(f"- {name} / {key}: `{Path(path).name}`")
+    for key in ("csv", "points_csv", "png", "pdf"):
+        if key in fp:
+            md.append(f"- fixed_points / {key}: `{Path(fp[key]).name}`")
+    return "\n".join(md) + "\n"
+
+
+def _section_balanced(bl: dict) -> list[str]:
+    s = bl["sizes"]
+    md = ["## 1. Balanced leg use (fig. legvariance, protocol §2)", "",
+          f"{s['robots_per_policy']} robots per policy, {s['duration_s']:g} s at {s['command_mps']:g} m/s, random "
+          "phases; per robot and leg the mean normalised GRF over the whole episode, pooled per configuration. "
+          "Figure: `balanced_legs.png`.", ""]
+    rows = []
+    for c, st in bl["configs"].items():
+        rows.append([c, st["policies"], st["n"], st["falls"],
+                     " / ".join(f"{v:.2f}" for v in st["median"]),
+                     " / ".join(f"{v:.2f}" for v in st["iqr"]),
+                     f"{100 * st['frac_leg_near_zero']:.0f} %", _fmt(st["mean_max_deviation"])])
+    md += [markdown_table(["ORC", "policies", "robots", "falls", "median ḡ " + "/".join(LEG_NAMES),
+                           "IQR " + "/".join(LEG_NAMES), "robots with a leg < 0.05", "mean max |ḡ − 0.25|"], rows), ""]
+    md += ["Paper (qualitative): ORC(11x) roughly centred on 0.25 for every leg, ORC(110) slightly wider than "
+           "ORC(111); every other configuration wide, with clusters near 0 for at least one leg (2- or 3-legged "
+           "gaits)."]
+    inner = [c for c in bl["configs"] if c in ("110", "111")]
+    outer = [c for c in bl["configs"] if c not in ("110", "111")]
+    if inner and outer:
+        dev_in = np.mean([bl["configs"][c]["mean_max_deviation"] for c in inner])
+        dev_out = np.mean([bl["configs"][c]["mean_max_deviation"] for c in outer])
+        md += [f"Here: mean max |ḡ − 0.25| is {dev_in:.3f} for ORC(11x) and {dev_out:.3f} for the others, so ORC(11x) "
+               f"is {'more' if dev_in < dev_out else 'not more'} balanced (paper: more)."]
+    return md + [""]
+
+
+def _section_emergence(ge: dict) -> list[str]:
+    md = ["## 2. Gait emergence (figs. rpdPlots, gait111eval111, gait110eval111; protocol §4)", ""]
+    if not ge.get("experiments"):
+        return md + [f"Skipped: {ge.get('skipped', 'no data')}.", ""]
+    s = ge["sizes"]
+    md += [f"One policy per configuration (seeded random pick), {s['runs']} runs, {s['duration_s']:g} s at 1 m/s. "
+           "Initial gait: the first two complete RF cycles. Settling time: first checkpoint at which ≥ 90 % of runs "
+           "show their final gait (not reported when most runs end in Transition). Figures: "
+           "`gait_emergence_rpd_scatter.png`, `gait_emergence_distribution_*.png`.", ""]
+    rows = []
+    for key, e in ge["experiments"].items():
+        ended_in_gaits = 1.0 - e["final_fractions"].get("transition", 1.0)
+        settling = _fmt(e["settling_time_s"], 0, " s") if ended_in_gaits >= 0.5 else "– (mostly Transition)"
+        rows.append([key.replace("_sigma", ", σ = "), e["policy"], settling,
+                     PAPER_SETTLING.get(key, "–"), _shares(e["initial_fractions"]), _shares(e["final_fractions"]),
+                     PAPER_FINAL_GAITS.get(key, "–"), _fmt(e["median_initial_final_distance"]),
+                     f"{100 * e['contact_phase_label_agreement']:.0f} %", e["falls"]])
+    md += [markdown_table(["experiment", "policy", "settling", "paper settling", "initial gaits", "final gaits",
+                           "paper final gaits", "median initial→final RPD distance [rad]",
+                           "contact/oscillator label agreement (final)", "falls"], rows), ""]
+    return md
+
+
+def _section_pace(pt: dict) -> list[str]:
+    md = ["## 3. Pace to trot (fig. pacetotrot, protocol §5)", ""]
+    if pt.get("skipped"):
+        return md + [f"Skipped: {pt['skipped']}.", ""]
+    sel = pt["selection"]
+    md += [f"Run {pt['run']} of the ORC(111), σ = 1 experiment ({pt['policy']}); selection: {sel['rule']} "
+           f"({sel['candidates']} strict candidates). Start: {sel['start_label']} (distance to pace "
+           f"{_fmt(sel['start_distance_to_pace'])}), at {sel['end_time_s']:g} s: {sel['end_label']} (distance to "
+           f"trot {_fmt(sel['end_distance_to_trot'])}). Figure: `pace_to_trot.png`.", "",
+           "Share of each leg's GRF inside its own oscillator's stance half [π, 2π) (paper: stance GRF falls between "
+           "the π and 0 crossings in every cycle, i.e. ≈ 100 %): "
+           + ", ".join(f"{leg} {100 * v:.0f} %" for leg, v in pt["stance_share"].items()), ""]
+    return md
+
+
+def _section_disturbance(db: dict) -> list[str]:
+    s = db["sizes"]
+    md = ["## 4. Disturbance rejection (Table I, protocol §6)", "",
+          f"Per policy and impulse: {s['robots_per_policy_and_impulse']} robots ({s['slots']} slots × "
+          f"{s['directions']} directions, {s['direction_mode']} spacing), {s['command_mps']:g} m/s command, "
+          f"{s['settle_s']:g} s settling, {s['test_s']:g} s test window; failure = termination from the command "
+          "to the second-to-last test sample. Mean ± population std over the policies of each configuration; "
+          "bold = lowest mean of the row. Figures: `disturbance_failure_rate.png`, `disturbance_velocity.png`.", "",
+          "**This reproduction:**", "", db["table_markdown"], "", "**Paper (Table I):**", "", paper_table_markdown(), ""]
+    falls = db.get("falls_before_push", {})
+    if any(falls.values()):
+        md += ["Falls before the first push (counted as failures, as in the released analysis): "
+               + ", ".join(f"ORC({c}) {n}" for c, n in falls.items()), ""]
+    claims = table_claims(db["stats"])
+    if claims:
+        md += ["Claims of the paper, checked on these numbers:", ""] + [f"- {line}" for line in claims] + [""]
+    return md
+
+
+def _section_fixed_points(fp: dict) -> list[str]:
+    rows = []
+    for name, points in fp["fixed_points"].items():
+        found = ", ".join(f"{p:.3f} ({s})" for p, s in points) or "none"
+        rows.append([name, found, EXPECTED_FIXED_POINTS.get(name, "–")])
+    return ["## 5. Oscillator fixed points (fig. offset, protocol §7)", "",
+            "Analytic, GRF = 0.25, ω = 1 Hz unless noted. Figure: `oscillator_fixed_points.png`.", "",
+            markdown_table(["curve", "fixed points [rad] here", "expected (protocol §7)"], rows), ""]
+
+
+# --- command line ---------------------------------------------------------------------------------
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_cli_args(parser, out_default="report")
+    args = parser.parse_args(argv)
+    try:
+        policies = runs_from_args(args)
+        if not any(p.task == DEFAULT_TASK for p in policies):
+            raise ValueError(f"no {DEFAULT_TASK} runs (env.yaml with osc.orc) in {args.runs or 'the shipped policies'}")
+    except (FileNotFoundError, RuntimeError, ValueError) as err:
+        parser.exit(2, f"error: {err}\n")
+    source = f"runs in {args.runs}" if args.runs else "shipped policies (resources/policies)"
+    result = build(policies, args.out, quick=args.quick, settings=EvalSettings(process_noise_std=args.process_noise),
+                   seed=args.seed, source=source)
+    print(f"report: {result['report']}")
+
+
+if __name__ == "__main__":
+    main()

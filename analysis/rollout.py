@@ -1,0 +1,520 @@
+"""Batched evaluation rollouts of trained policies (analysis protocol §1.6, §1.7).
+
+Every analysis module simulates through `run_jobs` (or the lower-level `rollout`): many robots in one
+MuJoCo batch, several policies side by side in the same batch when their evaluation configs agree,
+a fixed command, optional per-robot velocity impulses, and per-control-step recording of named
+signals into numpy arrays.
+
+Evaluation setting (`EvalSettings`, applied to the run's own env.yaml as `section.key=value`
+overrides, see `eval_overrides`): no random pushes, no command resampling, no time-outs, friction,
+mass and COM randomisation off, reset to the default pose at zero velocity, oscillator ω/σ jitter 0,
+actor observation noise off, deterministic actions (the policy callable is expected to return the
+mean action). Command ranges are all zero, so a robot that falls (its `terminated` flag) is reset
+standing with a zero command, as in the released scripts. Oscillator process noise is a switch
+(`EvalSettings.process_noise_std`): 0 by default, the authors' evident intent; the released
+evaluation scripts actually ran with 0.25 because their switch-off wrote to a misnamed field.
+
+Recording: sample k of a recorded signal is the state right after control step `record_from + k + 1`
+(logged once per control step, 100 Hz). `terminated[n, k]` is True if robot n ended an episode on
+that step; the recorded state is then the state after its reset.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import torch
+import yaml
+from tensordict import TensorDict
+
+from gym_envs.config import apply_overrides, to_dict
+from gym_envs.legged_robot import REPO_ROOT
+from gym_envs.registry import make_env
+
+DEFAULT_TASK = "mini_cheetah_osc"
+DEFAULT_MAX_BATCH = 4096  # robots per MuJoCo batch
+SHIPPED_POLICIES = os.path.join(REPO_ROOT, "resources", "policies")
+
+Policy = Callable[[TensorDict], torch.Tensor]
+
+
+# --- policies -----------------------------------------------------------------------------------
+
+
+@dataclass
+class PolicyRun:
+    """One trained policy: its deterministic actor and the env config it was trained with.
+
+    `policy(obs)` takes the env's observation TensorDict (groups "actor", "critic") and returns the
+    mean action (N, 12). `env_cfg` is the task config rebuilt from the run's env.yaml.
+    """
+
+    name: str
+    env_cfg: Any
+    policy: Policy
+    task: str = DEFAULT_TASK
+    path: str | None = None
+
+    @property
+    def orc(self) -> str:
+        return str(self.env_cfg.osc.orc)
+
+
+def group_by_orc(runs: Sequence[PolicyRun]) -> dict[str, list[PolicyRun]]:
+    """ORC string -> its runs (in the given order)."""
+    groups: dict[str, list[PolicyRun]] = {}
+    for run in runs:
+        groups.setdefault(run.orc, []).append(run)
+    return groups
+
+
+def limit_per_config(runs: Sequence[PolicyRun], max_per_config: int | None) -> list[PolicyRun]:
+    """At most max_per_config runs of each ORC configuration, keeping the first ones (None: all)."""
+    if max_per_config is None:
+        return list(runs)
+    taken: dict[str, int] = {}
+    out = []
+    for run in runs:
+        if taken.get(run.orc, 0) < max_per_config:
+            taken[run.orc] = taken.get(run.orc, 0) + 1
+            out.append(run)
+    return out
+
+
+class StackedPolicy:
+    """Several policies side by side: rows [offsets[i], offsets[i+1]) of the batch belong to policies[i]."""
+
+    def __init__(self, policies: Sequence[Policy], counts: Sequence[int]):
+        if len(policies) != len(counts):
+            raise ValueError("one robot count per policy")
+        self.policies = list(policies)
+        self.offsets = np.concatenate([[0], np.cumsum(counts)]).astype(int)
+
+    def __call__(self, obs: TensorDict) -> torch.Tensor:
+        if len(self.policies) == 1:
+            return self.policies[0](obs)
+        parts = [p(obs[a:b]) for p, a, b in zip(self.policies, self.offsets[:-1], self.offsets[1:])]
+        return torch.cat(parts, dim=0)
+
+
+def load_runs(root: str | None = None) -> list[PolicyRun]:
+    """Every run folder under root (a run, an experiment folder, or a log root), loaded for evaluation.
+
+    root=None means the shipped policies (resources/policies/ORC_<xyz>/). The loading itself
+    (env config from env.yaml, deterministic actor from the newest checkpoint) is learning's.
+    """
+    root = SHIPPED_POLICIES if root is None else root
+    if not os.path.isdir(root):
+        raise FileNotFoundError(f"runs folder {root} does not exist")
+    run_dirs = find_run_dirs(root)
+    if not run_dirs:
+        raise FileNotFoundError(
+            f"no runs in {root}: expected run folders (env.yaml with osc.orc, train.yaml, model_<it>.pt) "
+            f"at most two levels down, e.g. {root}/<experiment>/<date>_<run>/"
+        )
+    return [load_policy_run(d) for d in run_dirs]
+
+
+def find_run_dirs(root: str, depth: int = 2) -> list[str]:
+    """Folders with an env.yaml that are root itself or at most `depth` levels below it, sorted by path."""
+    if os.path.isfile(os.path.join(root, "env.yaml")):
+        return [os.path.abspath(root)]
+    found = []
+    if depth > 0:
+        for name in sorted(os.listdir(root)):
+            sub = os.path.join(root, name)
+            if os.path.isdir(sub):
+                found += find_run_dirs(sub, depth - 1)
+    return found
+
+
+def load_policy_run(run_dir: str) -> PolicyRun:
+    """Rebuild a run's env config and deterministic actor with learning's loader."""
+    try:
+        from learning.runs import load_policy
+    except ImportError:
+        raise RuntimeError(
+            f"cannot load {run_dir}: learning has no policy loader yet (expected learning.runs.load_policy(run_dir) "
+            f"-> env config, deterministic actor)"
+        ) from None
+    loaded = load_policy(run_dir)
+    return PolicyRun(
+        name=os.path.relpath(run_dir, os.path.dirname(os.path.dirname(run_dir))),
+        env_cfg=loaded.env_cfg,
+        policy=loaded.policy,
+        task=getattr(loaded, "task", DEFAULT_TASK),
+        path=run_dir,
+    )
+
+
+# --- evaluation config ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EvalSettings:
+    phase_init: str = "random"  # gym_envs.oscillators.PHASE_INIT_MODES; i.i.d. U[0, 2pi) per leg
+    process_noise_std: float = 0.0  # [Hz] per leg and substep; the released eval scripts ran with 0.25
+    observation_noise: bool = False  # actor observation noise (the play script kept it on)
+    coupling: float | None = None  # moving coupling sigma at evaluation; None: as trained
+    episode_length_s: float = 1.0e6  # no time-outs within any protocol
+
+    def describe(self) -> str:
+        coupling = "as trained" if self.coupling is None else f"{self.coupling:g}"
+        return (
+            f"phase init {self.phase_init}, process noise {self.process_noise_std:g} Hz, observation noise "
+            f"{'on' if self.observation_noise else 'off'}, coupling {coupling}"
+        )
+
+
+def eval_overrides(settings: EvalSettings, orc: str) -> list[str]:
+    """The `section.key=value` overrides that turn a training config into the evaluation setting.
+
+    Coupling: None keeps the trained value; otherwise only the moving coupling changes
+    (osc.coupling_max = sigma, protocol §4), the standing parameters stay. A policy trained with
+    C=0 has no coupling at all in this implementation, so sigma > 0 also switches its C bit on;
+    O and R are kept, so observations and rewards stay those the policy was trained with.
+    """
+    overrides = [
+        "push.enabled=false",
+        "commands.resampling_time_s=1.0e12",
+        "commands.lin_vel_x_choices=[]",
+        "commands.lin_vel_x=[0.0, 0.0]",
+        "commands.lin_vel_x_noise=0.0",
+        "commands.lin_vel_y=[0.0, 0.0]",
+        "commands.yaw_rate=[0.0, 0.0]",
+        f"env.episode_length_s={float(settings.episode_length_s)!r}",
+        "domain_rand.randomize_friction=false",
+        "domain_rand.randomize_base_mass=false",
+        "domain_rand.randomize_base_com=false",
+        "init_state.mode=default",
+        f"osc.init={settings.phase_init}",
+        "osc.omega_noise_std=0.0",
+        "osc.coupling_noise_std=0.0",
+        f"osc.process_noise_std={float(settings.process_noise_std)!r}",
+        f"observations.noise_scale={1.0 if settings.observation_noise else 0.0}",
+    ]
+    if settings.coupling is not None:
+        sigma = float(settings.coupling)
+        if sigma > 0 and orc[2] == "0":
+            overrides.append(f"osc.orc={orc[:2]}1")
+        overrides.append(f"osc.coupling_max={sigma!r}")
+    return overrides
+
+
+def eval_env_cfg(run_cfg, settings: EvalSettings, num_envs: int, seed: int = 0, num_threads: int = 0):
+    """A copy of the run's env config in the evaluation setting (the run's config is not modified)."""
+    extra = [f"env.num_envs={int(num_envs)}", f"env.seed={int(seed)}", f"sim.num_threads={int(num_threads)}"]
+    return apply_overrides(run_cfg, eval_overrides(settings, str(run_cfg.osc.orc)) + extra)
+
+
+def _cfg_key(task: str, cfg) -> str:
+    """Configs that agree up to the batch size and seed can share one batch."""
+    data = to_dict(cfg)
+    data["env"] = {k: v for k, v in data["env"].items() if k not in ("num_envs", "seed")}
+    return task + "\n" + yaml.safe_dump(data, sort_keys=True)
+
+
+# --- recording ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Signal:
+    read: Callable[[Any], torch.Tensor]
+    shape: tuple[int, ...]
+    dtype: Any = np.float32
+    doc: str = ""
+
+
+SIGNALS: dict[str, Signal] = {
+    "grf": Signal(lambda e: e.grf, (4,), doc="normalised GRF per foot, last substep (RF, LF, RH, LH)"),
+    "phase": Signal(lambda e: e.phase, (4,), doc="oscillator phases [rad] in [0, 2pi)"),
+    "base_lin_vel": Signal(lambda e: e.base_lin_vel, (3,), doc="trunk linear velocity, body frame [m/s]"),
+    "base_ang_vel": Signal(lambda e: e.base_ang_vel, (3,), doc="trunk angular velocity, body frame [rad/s]"),
+    "base_height": Signal(lambda e: e.state.base_pos[:, 2], (), doc="trunk height, world z [m]"),
+    "command": Signal(lambda e: e.commands, (3,), doc="command (v_x, v_y, yaw rate)"),
+    "joint_pos": Signal(lambda e: e.joint_pos, (12,), doc="joint positions [rad]"),
+    "terminated": Signal(lambda e: e.terminated, (), np.bool_, doc="the robot fell (trunk contact) on this step"),
+}
+DEFAULT_RECORD = ("grf", "phase", "base_lin_vel", "base_height", "terminated")
+
+
+@dataclass
+class Rollout:
+    """Recorded signals of one batch of robots; data[name] has shape (N, T, ...)."""
+
+    data: dict[str, np.ndarray]
+    initial_phase: np.ndarray  # (N, 4) oscillator phases before the first step
+    dt: float  # control step [s]
+    num_steps: int
+    record_from: int = 0
+    info: dict = field(default_factory=dict)
+
+    @property
+    def num_envs(self) -> int:
+        return self.initial_phase.shape[0]
+
+    @property
+    def times(self) -> np.ndarray:
+        """Time [s] of each recorded sample, counted from the first control step."""
+        n = next(iter(self.data.values())).shape[1] if self.data else 0
+        return (self.record_from + 1 + np.arange(n)) * self.dt
+
+    def fell(self) -> np.ndarray:
+        """(N,) robots that terminated at least once in the recorded window."""
+        return self.data["terminated"].any(axis=1)
+
+    def rows(self, index) -> Rollout:
+        """The same rollout restricted to some robots."""
+        return dataclasses.replace(
+            self,
+            data={k: v[index] for k, v in self.data.items()},
+            initial_phase=self.initial_phase[index],
+            info=dict(self.info),
+        )
+
+
+# --- progress -------------------------------------------------------------------------------------
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr: redrawn in place on a terminal, a few plain lines otherwise."""
+
+    def __init__(self, total: int, label: str = "", enabled: bool = True, stream=None, width: int = 24):
+        self.total, self.label, self.enabled, self.width = max(int(total), 1), label, enabled, width
+        self.stream = stream or sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.start = time.perf_counter()
+        self._last_draw = 0.0
+        self._next_mark = 0.25
+
+    def update(self, done: int) -> None:
+        if not self.enabled:
+            return
+        frac = min(done / self.total, 1.0)
+        now = time.perf_counter()
+        if self.tty:
+            if now - self._last_draw >= 0.2 or done >= self.total:
+                self._last_draw = now
+                self.stream.write("\r" + self._line(done, frac, now))
+                if done >= self.total:
+                    self.stream.write("\n")
+                self.stream.flush()
+        elif frac >= self._next_mark - 1e-9:
+            while frac >= self._next_mark - 1e-9:
+                self._next_mark += 0.25
+            self.stream.write(self._line(done, frac, now) + "\n")
+            self.stream.flush()
+
+    def _line(self, done: int, frac: float, now: float) -> str:
+        filled = int(round(frac * self.width))
+        elapsed = now - self.start
+        eta = elapsed / frac - elapsed if frac > 0 else math.inf
+        eta_text = f"{eta:5.0f}s left" if done < self.total and math.isfinite(eta) else f"{elapsed:5.1f}s"
+        bar = "#" * filled + "." * (self.width - filled)
+        return f"{self.label} [{bar}] {100 * frac:3.0f}% {done}/{self.total} {eta_text}"
+
+
+# --- rolling out ----------------------------------------------------------------------------------
+
+
+def rollout(
+    policy: Policy,
+    env_cfg,
+    num_steps: int,
+    command=(1.0, 0.0, 0.0),
+    command_step: int = 0,
+    record: Sequence[str] = DEFAULT_RECORD,
+    record_from: int = 0,
+    push_step: np.ndarray | None = None,
+    push_delta: np.ndarray | None = None,
+    task: str = DEFAULT_TASK,
+    progress: bool = True,
+    label: str = "rollout",
+) -> Rollout:
+    """Simulate env_cfg.env.num_envs robots for num_steps control steps under `policy`.
+
+    command (v_x, v_y, yaw rate), or one row per robot, is set before control step `command_step`
+    (0: from the start; until then the evaluation command is 0). Robot n gets push_delta[n]
+    (world-frame planar velocity, m/s) added to its trunk just before control step push_step[n]
+    (negative: never). Signals in `record` (keys of SIGNALS) are kept from step record_from on.
+    """
+    unknown = [name for name in record if name not in SIGNALS]
+    if unknown:
+        raise ValueError(f"unknown signals {unknown}; known: {', '.join(SIGNALS)}")
+    env = make_env(task, env_cfg)
+    n = env.num_envs
+    command = torch.as_tensor(np.asarray(command, dtype=np.float32), device=env.device).expand(n, 3)
+    pushes = _push_plan(n, push_step, push_delta)
+
+    n_rec = max(num_steps - record_from, 0)
+    buffers = {name: np.zeros((n, n_rec) + SIGNALS[name].shape, SIGNALS[name].dtype) for name in record}
+    initial_phase = env.phase.detach().cpu().numpy().copy()
+    bar = ProgressBar(num_steps, label, enabled=progress)
+    obs = env.get_observations()
+    torch_threads = torch.get_num_threads()
+    # The MuJoCo batch has the cores; torch's own thread pool fighting it for them makes the small
+    # policy forward passes orders of magnitude slower.
+    torch.set_num_threads(1)
+    try:
+        _loop(env, policy, obs, num_steps, command, command_step, pushes, buffers, record_from, bar)
+    finally:
+        torch.set_num_threads(torch_threads)
+    return Rollout(buffers, initial_phase, env.dt, num_steps, record_from)
+
+
+def _loop(env, policy, obs, num_steps, command, command_step, pushes, buffers, record_from, bar) -> None:
+    with torch.inference_mode():
+        for k in range(num_steps):
+            if k == command_step:
+                env.commands[:] = command
+                obs = env.get_observations()  # the command is part of the observation
+            if k in pushes:
+                ids, delta = pushes[k]
+                env.sim.push_base(ids, delta)
+            obs, _, _, _ = env.step(policy(obs))
+            if k >= record_from:
+                for name, buf in buffers.items():
+                    buf[:, k - record_from] = SIGNALS[name].read(env).detach().cpu().numpy()
+            bar.update(k + 1)
+
+
+def _push_plan(n, push_step, push_delta) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    if push_step is None:
+        return {}
+    push_step = np.asarray(push_step, dtype=int)
+    push_delta = np.asarray(push_delta, dtype=float)
+    if push_step.shape != (n,) or push_delta.shape != (n, 2):
+        raise ValueError(f"push_step must be ({n},) and push_delta ({n}, 2), got {push_step.shape}, {push_delta.shape}")
+    plan = {}
+    for step in np.unique(push_step[push_step >= 0]):
+        ids = np.flatnonzero(push_step == step)
+        plan[int(step)] = (ids, push_delta[ids])
+    return plan
+
+
+@dataclass
+class Job:
+    """num_envs robots of one policy, optionally with a per-robot push schedule (see `rollout`)."""
+
+    run: PolicyRun
+    num_envs: int
+    push_step: np.ndarray | None = None
+    push_delta: np.ndarray | None = None
+    tag: Any = None  # free label for the caller (e.g. the push magnitude)
+
+
+def run_jobs(
+    jobs: Sequence[Job],
+    num_steps: int,
+    settings: EvalSettings = EvalSettings(),
+    command=(1.0, 0.0, 0.0),
+    command_step: int = 0,
+    record: Sequence[str] = DEFAULT_RECORD,
+    record_from: int = 0,
+    seed: int = 0,
+    max_batch: int = DEFAULT_MAX_BATCH,
+    num_threads: int = 0,
+    progress: bool = True,
+    label: str = "rollout",
+) -> list[Rollout]:
+    """Roll out every job; returns one Rollout per job, in order.
+
+    Jobs whose evaluation configs agree share MuJoCo batches of at most max_batch robots (a job is
+    never split); batch b is seeded with seed + b, so results are reproducible for the same jobs.
+    """
+    cfgs = [eval_env_cfg(j.run.env_cfg, settings, j.num_envs, seed, num_threads) for j in jobs]
+    keys = [_cfg_key(j.run.task, c) for j, c in zip(jobs, cfgs)]
+    batches: list[list[int]] = []
+    for key in dict.fromkeys(keys):
+        current, size = [], 0
+        for i in (i for i, k in enumerate(keys) if k == key):
+            if current and size + jobs[i].num_envs > max_batch:
+                batches.append(current)
+                current, size = [], 0
+            current.append(i)
+            size += jobs[i].num_envs
+        batches.append(current)
+
+    results: list[Rollout | None] = [None] * len(jobs)
+    for b, members in enumerate(batches):
+        counts = [jobs[i].num_envs for i in members]
+        total = sum(counts)
+        cfg = apply_overrides(cfgs[members[0]], [f"env.num_envs={total}", f"env.seed={seed + b}"])
+        push_step, push_delta = _stack_pushes([jobs[i] for i in members])
+        tag = f"{label} {b + 1}/{len(batches)}" if len(batches) > 1 else label
+        out = rollout(
+            StackedPolicy([jobs[i].run.policy for i in members], counts), cfg, num_steps, command, command_step,
+            record, record_from, push_step, push_delta, jobs[members[0]].run.task, progress, f"{tag} ({total} robots)",
+        )
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        for i, a, z in zip(members, offsets[:-1], offsets[1:]):
+            part = out.rows(slice(a, z))
+            part.info.update(run=jobs[i].run.name, orc=jobs[i].run.orc, tag=jobs[i].tag, seed=seed + b,
+                             settings=settings)
+            results[i] = part
+    return results  # type: ignore[return-value]
+
+
+def _stack_pushes(jobs: Sequence[Job]):
+    if all(j.push_step is None for j in jobs):
+        return None, None
+    steps, deltas = [], []
+    for j in jobs:
+        if j.push_step is None:
+            steps.append(np.full(j.num_envs, -1))
+            deltas.append(np.zeros((j.num_envs, 2)))
+        else:
+            steps.append(np.asarray(j.push_step, dtype=int))
+            deltas.append(np.asarray(j.push_delta, dtype=float))
+    return np.concatenate(steps), np.concatenate(deltas)
+
+
+# --- command line shared by the analysis modules ---------------------------------------------------
+
+
+def add_cli_args(parser, out_default: str | None = None) -> None:
+    parser.add_argument("--runs", default=None,
+                        help="folder of training runs (a sweep's output); default: the shipped policies")
+    parser.add_argument("--out", required=out_default is None, default=out_default,
+                        help="output folder" + (f" (default: {out_default})" if out_default else ""))
+    parser.add_argument("--quick", action="store_true", help="reduced sizes (minutes on 2 cores)")
+    parser.add_argument("--max-per-config", type=int, default=None,
+                        help="use at most this many runs per ORC (default: all; 2 with --quick)")
+    parser.add_argument("--process-noise", type=float, default=0.0,
+                        help="oscillator process noise [Hz] at evaluation (released scripts: 0.25)")
+    parser.add_argument("--seed", type=int, default=0)
+
+
+QUICK_MAX_PER_CONFIG = 2  # --quick without --max-per-config uses this many runs of each configuration
+
+
+def runs_from_args(args) -> list[PolicyRun]:
+    limit = args.max_per_config if args.max_per_config is not None else (QUICK_MAX_PER_CONFIG if args.quick else None)
+    return limit_per_config(load_runs(args.runs), limit)
+
+
+def cli_main(description: str, run_fn, argv=None) -> None:
+    """`python -m analysis.<module>`: load the runs, call run_fn(runs, out, quick, settings, seed), print paths.
+
+    Problems with the runs folder end the program with a one-line message instead of a traceback.
+    """
+    import argparse
+
+    parser = argparse.ArgumentParser(description=description)
+    add_cli_args(parser)
+    args = parser.parse_args(argv)
+    try:
+        runs = runs_from_args(args)
+    except (FileNotFoundError, RuntimeError, ValueError) as err:
+        parser.exit(2, f"error: {err}\n")
+    settings = EvalSettings(process_noise_std=args.process_noise)
+    summary = run_fn(runs, args.out, quick=args.quick, settings=settings, seed=args.seed)
+    for key, value in summary.get("files", {}).items():
+        print(f"{key}: {value}")
