@@ -189,7 +189,7 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
         rollouts = run_jobs(chunk, tl["total"], settings, command=(ball.command, 0.0, 0.0),
                             command_step=tl["command_step"], record=("terminated", "base_lin_vel"), record_from=1,
                             seed=seed + 1000 * c, max_batch=max_batch, progress=progress,
-                            label=f"push ball {c + 1}/{len(chunks)}")
+                            label=f"push ball, part {c + 1}/{len(chunks)}" if len(chunks) > 1 else "push ball")
         for job, r in zip(chunk, rollouts):
             term = r.data["terminated"]
             fails = failed(term, tl["fail_window_end"])

@@ -110,6 +110,8 @@ def load_runs(root: str | None = None) -> list[PolicyRun]:
     root=None means the shipped policies (resources/policies/ORC_<xyz>/). The loading itself
     (env config from env.yaml, deterministic actor from the newest checkpoint) is learning's.
     """
+    if root is None and not os.path.isdir(SHIPPED_POLICIES):
+        raise FileNotFoundError(f"no shipped policies at {SHIPPED_POLICIES}; pass --runs DIR (a sweep's log folder)")
     root = SHIPPED_POLICIES if root is None else root
     if not os.path.isdir(root):
         raise FileNotFoundError(f"runs folder {root} does not exist")
@@ -448,7 +450,7 @@ def run_jobs(
         total = sum(counts)
         cfg = apply_overrides(cfgs[members[0]], [f"env.num_envs={total}", f"env.seed={seed + b}"])
         push_step, push_delta = _stack_pushes([jobs[i] for i in members])
-        tag = f"{label} {b + 1}/{len(batches)}" if len(batches) > 1 else label
+        tag = f"{label}, batch {b + 1}/{len(batches)}" if len(batches) > 1 else label
         out = rollout(
             StackedPolicy([jobs[i].run.policy for i in members], counts), cfg, num_steps, command, command_step,
             record, record_from, push_step, push_delta, jobs[members[0]].run.task, progress, f"{tag} ({total} robots)",
