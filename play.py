@@ -250,12 +250,9 @@ class VideoRecorder:
         import imageio
         import mujoco
 
-        sim = session.task.sim
-        if not hasattr(sim, "batch"):
-            raise ConfigError("--video needs the 'mujoco' backend (pass --sim mujoco)")
         self.mujoco = mujoco
-        self.batch = sim.batch
-        self.model = self.batch.get_model(0)
+        self.sim = session.task.sim
+        self.model = self.sim.model
         self.data = mujoco.MjData(self.model)
         height = min(VIDEO_SIZE[0], self.model.vis.global_.offheight)
         width = min(VIDEO_SIZE[1], self.model.vis.global_.offwidth)
@@ -274,7 +271,7 @@ class VideoRecorder:
     def capture(self, step: int) -> None:
         if step % self.every:
             return
-        self.batch.get_data(0, self.data)
+        self.sim.copy_state_to(0, self.data)
         self.mujoco.mj_forward(self.model, self.data)
         self.renderer.update_scene(self.data, camera="track")
         self.writer.append_data(self.renderer.render())
@@ -293,8 +290,8 @@ class Viewer:
         import mujoco.viewer
 
         self.mujoco, self.session = mujoco, session
-        self.batch = session.task.sim.batch
-        self.model = self.batch.get_model(0)
+        self.sim = session.task.sim
+        self.model = self.sim.model
         self.data = mujoco.MjData(self.model)
         self.command = list(command)
         self.pending = None
@@ -317,7 +314,7 @@ class Viewer:
             command, self.pending = self.pending, None
             self.session.set_command(*command)
             print(f"command: v_x {command[0]:+.2f}  v_y {command[1]:+.2f}  yaw {command[2]:+.2f}", flush=True)
-        self.batch.get_data(0, self.data)
+        self.sim.copy_state_to(0, self.data)
         self.mujoco.mj_forward(self.model, self.data)
         self.handle.sync()
 

@@ -11,6 +11,7 @@ terms are methods `_obs_<name>`. Adding either is one method and one config entr
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 
@@ -60,7 +61,7 @@ class LeggedRobot:
     cfg: LeggedRobotCfg
 
     def __init__(self, cfg: LeggedRobotCfg):
-        self.cfg = cfg
+        self.cfg = cfg = copy.deepcopy(cfg)  # tasks adjust their copy (ORC); the caller's stays as given
         self.device = torch.device(cfg.env.device)
         self.num_envs = cfg.env.num_envs
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.env.seed)

@@ -135,8 +135,11 @@ class MiniCheetahOsc(MiniCheetah):
             raise ConfigError(
                 f"osc.init={cfg.osc.init!r} is unknown; choose one of {', '.join(oscillators.PHASE_INIT_MODES)}"
             )
-        apply_orc(cfg)
         super().__init__(cfg)
+
+    def _init_timing(self) -> None:
+        apply_orc(self.cfg)  # on the task's own copy, before the reward and observation terms are resolved
+        super()._init_timing()
 
     def _init_buffers(self) -> None:
         super()._init_buffers()

@@ -117,6 +117,18 @@ def test_reset_writes_the_given_state(make_sim):
     assert state.base_pos[1, 2] < 0.3  # env 1 untouched
 
 
+def test_copy_state_to_mjdata_for_rendering(make_sim):
+    import mujoco
+
+    sim = make_sim(num_envs=2)
+    hold_default(sim, 0.2)
+    sim.push_base(torch.tensor([1]), torch.tensor([[0.5, 0.0]]))
+    data = mujoco.MjData(sim.model)
+    sim.copy_state_to(1, data)
+    assert np.allclose(data.qpos[:3], sim.read_state().base_pos[1].numpy(), atol=1e-6)
+    assert data.qvel[0] == pytest.approx(sim.read_state().base_lin_vel[1, 0].item(), abs=1e-6)
+
+
 def test_missing_model_file_is_named(make_sim):
     with pytest.raises(SimSetupError, match="model file not found: '/nope/robot.xml'"):
         make_sim(model_path="/nope/robot.xml")

@@ -4,6 +4,7 @@ Warp compiles its kernels on first use (about 40 s cold on CPU, cached afterward
 ~/.cache/warp); the sims are built once per module to pay that once.
 """
 
+import mujoco
 import numpy as np
 import pytest
 import torch
@@ -143,6 +144,10 @@ def test_reset_writes_the_given_state(warp3):
     # The results are copies: stepping does not change a state already handed out.
     sim.step(sim.default_joint_pos.expand(3, -1).clone(), SUBSTEPS)
     assert torch.allclose(state.base_pos[ids], pos)
+    # An MjData for rendering gets the env's current state.
+    data = mujoco.MjData(sim.model)
+    sim.copy_state_to(2, data)
+    assert np.allclose(data.qpos[:3], sim.read_state().base_pos[2].numpy(), atol=1e-6)
 
 
 def test_randomisation_is_per_env(warp3):

@@ -154,6 +154,9 @@ class MujocoBatchBackend(MujocoModelBackend):
         self.batch.expand("body_ipos")[ids, self._base_body] = self.model.body_ipos[self._base_body] + _np(offset)
         self.batch.set_const(ids)
 
+    def copy_state_to(self, env_id: int, data: mujoco.MjData) -> None:
+        self.batch.get_data(env_id, data)
+
     def ground_friction(self) -> np.ndarray:
         """Per-env floor friction as the physics sees it (for tests and logs)."""
         expanded = self.batch.expanded("geom_friction")

@@ -77,6 +77,10 @@ class MujocoModelBackend(SimBackend):
         self._ground_geom = named_id(m, mujoco.mjtObj.mjOBJ_GEOM, ground_geom, "geom")
         return m
 
+    def copy_state_to(self, env_id: int, data: mujoco.MjData) -> None:
+        """Write env env_id's state into an MjData of self.model (to render or inspect it; run mj_forward after)."""
+        raise NotImplementedError
+
 
 def named_id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str, label: str) -> int:
     idx = mujoco.mj_name2id(model, kind, name)

@@ -436,6 +436,10 @@ class MujocoWarpBackend(MujocoModelBackend):
         self._ipos_t[ids, self._base_body] = base_ipos + self._values(offset)
         self._set_const()
 
+    def copy_state_to(self, env_id: int, data: mujoco.MjData) -> None:
+        data.qpos[:] = self._qpos_t[env_id].cpu().numpy()
+        data.qvel[:] = self._qvel_t[env_id].cpu().numpy()
+
     def ground_friction(self) -> np.ndarray:
         """Per-env floor friction as the physics sees it (for tests and logs)."""
         return self._friction_t[:, self._ground_geom, 0].cpu().numpy().astype(np.float64)
