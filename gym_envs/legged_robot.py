@@ -141,6 +141,7 @@ class LeggedRobot:
                                   f"known terms: {', '.join(known)}")
             self.reward_functions[name] = fn
         self.episode_sums = {name: torch.zeros(self.num_envs, device=self.device) for name in self.reward_weights}
+        self.tracking_error_sum = torch.zeros(self.num_envs, device=self.device)  # of |command_xy - v_xy| [m/s]
 
     def _init_observation_terms(self) -> None:
         obs = self.cfg.observations
@@ -202,6 +203,7 @@ class LeggedRobot:
         self.time_outs = self.episode_length_buf > self.max_episode_length
         self.reset_buf = self.terminated | self.time_outs
         self._compute_reward()
+        self.tracking_error_sum += torch.norm(self.commands[:, :2] - self.base_lin_vel[:, :2], dim=1)
         self._log_episodes(self.reset_buf.nonzero().flatten())
         self._reset_envs(self.terminated, self.time_outs)
 
@@ -239,6 +241,9 @@ class LeggedRobot:
                 log[f"Episode_Reward/{name}"] = torch.mean(sums[env_ids] / seconds)
                 sums[env_ids] = 0.0
             log["Episode/terminated"] = self.terminated[env_ids].float().mean()
+            steps = self.episode_length_buf[env_ids].float().clamp(min=1)
+            log["Episode/tracking_error"] = torch.mean(self.tracking_error_sum[env_ids] / steps)
+            self.tracking_error_sum[env_ids] = 0.0
         self.extras = {"time_outs": self.time_outs.clone(), "log": log}
 
     # --- resets ---------------------------------------------------------------------------------

@@ -71,11 +71,19 @@ class ProgressLogger(Logger):
     """rsl-rl's tensorboard logging with a one-line console summary per iteration."""
 
     prefix = ""
+    # Means over the episodes that ended in the last logged iteration (None before any ended).
+    last_reward: float | None = None
+    last_tracking_error: float | None = None
 
     def log(self, it, start_it, total_it, collect_time, learn_time, loss_dict, learning_rate, action_std,
             rnd_weight, print_minimal=False, width=80, pad=40) -> None:
         if self.writer is None:
             return
+        errors = [float(e["Episode/tracking_error"]) for e in self.ep_extras if "Episode/tracking_error" in e]
+        if errors:
+            self.last_tracking_error = statistics.mean(errors)
+        if self.rewbuffer:
+            self.last_reward = statistics.mean(self.rewbuffer)
         with quiet():
             super().log(it, start_it, total_it, collect_time, learn_time, loss_dict, learning_rate, action_std,
                         rnd_weight, print_minimal, width, pad)

@@ -1,0 +1,179 @@
+"""Train every ORC configuration of the paper for several seeds: the ablation's training campaign.
+
+    python sweep.py --seeds 0 1 2 --max_iterations 300 --profile cpu_fast --out logs/sweep
+    python sweep.py --orcs 111 110 --seeds 0 --set train.algorithm.learning_rate=1e-4
+
+Each run has a fixed folder <out>/ORC_<xyz>/seed<k>/ (env.yaml, train.yaml, model_<it>.pt,
+tensorboard events), so calling the same command again skips finished runs and resumes an
+interrupted one in place from its newest checkpoint (its configs must match the command's).
+<out>/manifest.csv lists configuration, seed, iterations, wall time, final reward and final
+tracking error (mean |command - velocity| of the last episodes) of every run; it is rewritten
+after each run. Ctrl-C stops the current run with a checkpoint and ends the sweep (exit 130).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import sys
+import time
+
+import yaml
+
+import train
+from gym_envs.config import ConfigError, apply_overrides, load_yaml, save_yaml, to_dict
+from gym_envs.orc import PAPER_CONFIGURATIONS, parse_orc
+from gym_envs.sim import SimSetupError
+from learning import runs
+from learning.runner import StopRequest
+
+MANIFEST = "manifest.csv"
+STATUS = "sweep_status.yaml"
+FIELDS = ("orc", "seed", "iterations", "wall_time_s", "final_reward", "tracking_error", "run_dir")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=__doc__.split("\n", 2)[2],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default=os.path.join(runs.default_log_root(), "sweep"), help="sweep folder")
+    parser.add_argument("--orcs", nargs="+", default=list(PAPER_CONFIGURATIONS), help="ORC strings (default: the 7 of the paper)")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--max_iterations", type=int, default=None, help="per run (default: the train config's)")
+    parser.add_argument("--num_envs", type=int, default=None)
+    parser.add_argument("--profile", default=None)
+    parser.add_argument("--num_threads", type=int, default=None)
+    parser.add_argument("--device", choices=("cpu", "cuda"), default=None)
+    parser.add_argument("--sim", choices=("mujoco", "warp"), default=None)
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help="config override for every run, as in train.py")
+    return parser
+
+
+def train_args(args, orc: str, seed: int) -> list[str]:
+    """The train.py command line of one run of the sweep."""
+    argv = ["--task", "mini_cheetah_osc", "--orc", orc, "--seed", str(seed), "--log_root", args.out,
+            "--experiment_name", f"ORC_{orc}", "--run_name", f"seed{seed}"]
+    for flag in ("max_iterations", "num_envs", "profile", "num_threads", "device", "sim"):
+        value = getattr(args, flag)
+        if value is not None:
+            argv += [f"--{flag}", str(value)]
+    for override in args.overrides:
+        argv += ["--set", override]
+    return argv
+
+
+def run_dir_of(out: str, orc: str, seed: int) -> str:
+    return os.path.join(out, f"ORC_{orc}", f"seed{seed}")
+
+
+def train_one(args, orc: str, seed: int) -> str:
+    """Train, resume or skip one run; returns 'finished', 'skipped' or 'stopped'."""
+    run_dir = run_dir_of(args.out, orc, seed)
+    setup = train.prepare(train.build_parser().parse_args(train_args(args, orc, seed)))
+    env_cfg, train_cfg, runner = setup.env_cfg, setup.train_cfg, setup.runner
+    done = runs.list_checkpoints(run_dir) if os.path.isdir(run_dir) else []
+    status = load_yaml_dict(os.path.join(run_dir, STATUS))
+    if done:
+        _check_same_configs(run_dir, env_cfg, train_cfg)
+        if max(done) >= train_cfg.max_iterations:
+            return "skipped"
+        runner.load(runs.checkpoint_path(run_dir, max(done)), context=f"ORC {orc} seed {seed}")
+        print(f"resuming {run_dir} from iteration {max(done)}", flush=True)
+    else:
+        os.makedirs(run_dir, exist_ok=True)
+        save_yaml(env_cfg, os.path.join(run_dir, runs.ENV_YAML))
+        save_yaml(train_cfg, os.path.join(run_dir, runs.TRAIN_YAML))
+        print(f"training {run_dir}", flush=True)
+    runner.attach_run_dir(run_dir, progress_prefix=f"[ORC_{orc} seed{seed}] ")
+    start = time.perf_counter()
+    with StopRequest() as stop:
+        finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
+    logger = runner.logger
+    status = {
+        "orc": orc,
+        "seed": seed,
+        "iterations": runner.current_learning_iteration,
+        "wall_time_s": round(float(status.get("wall_time_s", 0.0)) + time.perf_counter() - start, 1),
+        "final_reward": logger.last_reward if logger.last_reward is not None else status.get("final_reward"),
+        "tracking_error": (logger.last_tracking_error if logger.last_tracking_error is not None
+                           else status.get("tracking_error")),
+    }
+    save_status(status, os.path.join(run_dir, STATUS))
+    return "finished" if finished else "stopped"
+
+
+def _check_same_configs(run_dir: str, env_cfg, train_cfg) -> None:
+    """A run is only continued with the settings it was started with (iterations aside)."""
+    saved_env = to_dict(load_yaml(type(env_cfg), os.path.join(run_dir, runs.ENV_YAML)))
+    saved_train = load_yaml(type(train_cfg), os.path.join(run_dir, runs.TRAIN_YAML))
+    saved_train = to_dict(apply_overrides(saved_train, [f"max_iterations={train_cfg.max_iterations}"]))
+    for name, saved, now in (("env", saved_env, to_dict(env_cfg)), ("train", saved_train, to_dict(train_cfg))):
+        if saved != now:
+            key = _first_difference(saved, now)
+            raise ConfigError(f"{run_dir} was started with other {name} settings ({key} differs); "
+                              f"repeat its original options or choose another --out")
+
+
+def _first_difference(a, b, path: str = "") -> str:
+    if isinstance(a, dict) and isinstance(b, dict):
+        for key in list(a) + [k for k in b if k not in a]:
+            if a.get(key) != b.get(key):
+                return _first_difference(a.get(key), b.get(key), f"{path}.{key}" if path else str(key))
+    return path
+
+
+def load_yaml_dict(path: str) -> dict:
+    if not os.path.isfile(path):
+        return {}
+    with open(path) as f:
+        return yaml.safe_load(f) or {}
+
+
+def save_status(status: dict, path: str) -> None:
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        yaml.safe_dump(status, f, sort_keys=False)
+    os.replace(tmp, path)
+
+
+def write_manifest(out: str, orcs: list[str], seeds: list[int]) -> str:
+    rows = []
+    for orc in orcs:
+        for seed in seeds:
+            run_dir = run_dir_of(out, orc, seed)
+            status = load_yaml_dict(os.path.join(run_dir, STATUS))
+            if status:
+                rows.append({**{k: status.get(k, "") for k in FIELDS}, "run_dir": os.path.relpath(run_dir, out)})
+    path = os.path.join(out, MANIFEST)
+    tmp = path + ".tmp"
+    with open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(tmp, path)
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        for orc in args.orcs:
+            parse_orc(orc)
+        os.makedirs(args.out, exist_ok=True)
+        for orc in args.orcs:
+            for seed in args.seeds:
+                outcome = train_one(args, orc, seed)
+                print(f"ORC {orc} seed {seed}: {outcome}", flush=True)
+                write_manifest(args.out, args.orcs, args.seeds)
+                if outcome == "stopped":
+                    return train.EXIT_INTERRUPTED
+    except (ConfigError, SimSetupError) as err:
+        print(f"sweep.py: error: {runs.one_line(err)}", file=sys.stderr)
+        return 1
+    print(f"manifest: {write_manifest(args.out, args.orcs, args.seeds)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

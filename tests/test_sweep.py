@@ -1,0 +1,73 @@
+"""sweep.py: every configuration and seed in its own folder, finished runs skipped, interrupted ones resumed."""
+
+from __future__ import annotations
+
+import csv
+import os
+
+import pytest
+import torch
+
+import sweep
+from learning import runs
+
+TINY = ["--num_envs", "16", "--num_threads", "1", "--set", "train.num_steps_per_env=4", "--set", "env.episode_length_s=0.05"]
+
+
+def run_sweep(out, *args):
+    return sweep.main(["--out", str(out), "--orcs", "111", "010", "--seeds", "3", *TINY, *args])
+
+
+def manifest(out):
+    with open(os.path.join(out, "manifest.csv")) as f:
+        return {(row["orc"], row["seed"]): row for row in csv.DictReader(f)}
+
+
+def mtimes(folder):
+    return {f: os.stat(os.path.join(folder, f)).st_mtime_ns for f in os.listdir(folder)}
+
+
+def test_sweep_trains_skips_and_resumes(tmp_path):
+    assert run_sweep(tmp_path, "--max_iterations", "1") == 0
+    rows = manifest(tmp_path)
+    assert set(rows) == {("111", "3"), ("010", "3")}
+    for orc in ("111", "010"):
+        run_dir = tmp_path / f"ORC_{orc}" / "seed3"
+        assert {"env.yaml", "train.yaml", "model_0.pt", "model_1.pt"} <= set(os.listdir(run_dir))
+        assert rows[(orc, "3")]["iterations"] == "1"
+        assert float(rows[(orc, "3")]["wall_time_s"]) > 0
+        assert rows[(orc, "3")]["final_reward"] != ""
+    assert "orc: '010'" in (tmp_path / "ORC_010" / "seed3" / "env.yaml").read_text()
+
+    # The same command again: both runs are finished, nothing is touched.
+    before = mtimes(tmp_path / "ORC_111" / "seed3")
+    assert run_sweep(tmp_path, "--max_iterations", "1") == 0
+    assert mtimes(tmp_path / "ORC_111" / "seed3") == before
+
+    # More iterations: each run continues in its own folder from its newest checkpoint.
+    first_wall = float(manifest(tmp_path)[("111", "3")]["wall_time_s"])
+    assert run_sweep(tmp_path, "--max_iterations", "2") == 0
+    run_dir = tmp_path / "ORC_111" / "seed3"
+    assert runs.list_checkpoints(str(run_dir)) == [0, 1, 2]
+    assert torch.load(run_dir / "model_2.pt", weights_only=True)["iter"] == 2
+    assert os.stat(run_dir / "model_1.pt").st_mtime_ns == before["model_1.pt"]  # kept as it was
+    row = manifest(tmp_path)[("111", "3")]
+    assert row["iterations"] == "2" and float(row["wall_time_s"]) > first_wall
+    assert os.listdir(tmp_path / "ORC_111") == ["seed3"]  # no second folder for the resumed run
+
+
+def test_resuming_with_other_settings_is_refused(tmp_path, capsys):
+    assert sweep.main(["--out", str(tmp_path), "--orcs", "111", "--seeds", "0", *TINY, "--max_iterations", "1"]) == 0
+    code = sweep.main(["--out", str(tmp_path), "--orcs", "111", "--seeds", "0", *TINY, "--max_iterations", "2",
+                       "--set", "rewards.weights.torques=1e-6"])
+    assert code == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rewards.weights.torques differs" in err[0]
+    assert runs.list_checkpoints(str(tmp_path / "ORC_111" / "seed0")) == [0, 1]
+
+
+@pytest.mark.parametrize("orc", ["12", "abc"])
+def test_bad_orc_is_one_line(tmp_path, capsys, orc):
+    assert sweep.main(["--out", str(tmp_path), "--orcs", orc]) == 1
+    assert "malformed ORC string" in capsys.readouterr().err
+    assert not os.listdir(tmp_path)
