@@ -46,6 +46,7 @@ import argparse  # noqa: E402
 import time  # noqa: E402
 
 from gym_envs.config import ConfigError  # noqa: E402
+from gym_envs.evaluation import evaluation_overrides  # noqa: E402
 
 DEFAULT_DURATION_S = 10.0
 VIDEO_FPS = 50
@@ -105,39 +106,16 @@ def locate_run(args, log_root: str) -> str:
         ) from None
 
 
-def evaluation_overrides(env_cfg, args) -> list[str]:
+def play_overrides(env_cfg, args) -> list[str]:
     """The env overrides that turn the run's training env into the evaluation env."""
     if len(args.command) not in (1, 3):
         raise ConfigError(f"--command takes VX or VX VY YAW, got {len(args.command)} numbers")
     vx, vy, yaw = (list(args.command) + [0.0, 0.0])[:3]
-    items = [
-        f"env.num_envs={args.num_envs}",
-        "env.episode_length_s=1.0e9",
-        "commands.resampling_time_s=1.0e9",
-        f"commands.lin_vel_x=[{vx!r}, {vx!r}]",
-        "commands.lin_vel_x_choices=[]",
-        "commands.lin_vel_x_noise=0.0",
-        f"commands.lin_vel_y=[{vy!r}, {vy!r}]",
-        f"commands.yaw_rate=[{yaw!r}, {yaw!r}]",
-        "commands.small_command_norm=0.0",
-        "commands.zero_lateral_and_yaw_prob=0.0",
-        "commands.zero_planar_prob=0.0",
-        "commands.zero_all_prob=0.0",
-    ]
     has_osc = hasattr(env_cfg, "osc")
-    if not args.noise:
-        items.append("observations.noise_scale=0.0")
-        if has_osc:
-            items += ["osc.process_noise_std=0.0", "osc.omega_noise_std=0.0", "osc.coupling_noise_std=0.0"]
-    if not args.pushes:
-        items.append("push.enabled=false")
-    if not args.randomize:
-        items += [
-            "domain_rand.randomize_friction=false",
-            "domain_rand.randomize_base_mass=false",
-            "domain_rand.randomize_base_com=false",
-            "init_state.mode=default",
-        ]
+    items = [f"env.num_envs={args.num_envs}"] + evaluation_overrides(
+        env_cfg, (vx, vy, yaw), observation_noise=args.noise, oscillator_noise=args.noise,
+        pushes=args.pushes, randomize=args.randomize,
+    )
     if (args.osc_init or args.coupling or args.orc) and not has_osc:
         raise ConfigError("--osc_init, --coupling and --orc need a task with oscillators")
     if args.osc_init:
@@ -180,7 +158,7 @@ class Session:
         if args.task and args.task != saved_task:
             raise ConfigError(f"run {self.run_dir} trained task {saved_task!r}, not {args.task!r}")
         self.task_name = saved_task
-        env_cfg = apply_overrides(trained_env, evaluation_overrides(trained_env, args) + list(args.overrides))
+        env_cfg = apply_overrides(trained_env, play_overrides(trained_env, args) + list(args.overrides))
         self.orc = getattr(getattr(env_cfg, "osc", None), "orc", None)
         if self.orc is not None:
             orc = parse_orc(self.orc)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import glob
 import os
 import sys
 import time
@@ -137,14 +138,13 @@ def save_status(status: dict, path: str) -> None:
     os.replace(tmp, path)
 
 
-def write_manifest(out: str, orcs: list[str], seeds: list[int]) -> str:
+def write_manifest(out: str) -> str:
+    """manifest.csv of every run under out (all configurations and seeds any invocation trained)."""
     rows = []
-    for orc in orcs:
-        for seed in seeds:
-            run_dir = run_dir_of(out, orc, seed)
-            status = load_yaml_dict(os.path.join(run_dir, STATUS))
-            if status:
-                rows.append({**{k: status.get(k, "") for k in FIELDS}, "run_dir": os.path.relpath(run_dir, out)})
+    for status_path in sorted(glob.glob(os.path.join(out, "ORC_*", "seed*", STATUS))):
+        status = load_yaml_dict(status_path)
+        run_dir = os.path.dirname(status_path)
+        rows.append({**{k: status.get(k, "") for k in FIELDS}, "run_dir": os.path.relpath(run_dir, out)})
     path = os.path.join(out, MANIFEST)
     tmp = path + ".tmp"
     with open(tmp, "w", newline="") as f:
@@ -165,13 +165,13 @@ def main(argv: list[str] | None = None) -> int:
             for seed in args.seeds:
                 outcome = train_one(args, orc, seed)
                 print(f"ORC {orc} seed {seed}: {outcome}", flush=True)
-                write_manifest(args.out, args.orcs, args.seeds)
+                write_manifest(args.out)
                 if outcome == "stopped":
                     return train.EXIT_INTERRUPTED
     except (ConfigError, SimSetupError) as err:
         print(f"sweep.py: error: {runs.one_line(err)}", file=sys.stderr)
         return 1
-    print(f"manifest: {write_manifest(args.out, args.orcs, args.seeds)}")
+    print(f"manifest: {write_manifest(args.out)}")
     return 0
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import balanced_legs, disturbance, fixed_points, gait_emergence, pace_to_trot
+from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
 from analysis.plotting import LEG_NAMES, sort_configs
 from analysis.rollout import (
     DEFAULT_TASK,
@@ -187,7 +188,7 @@ def render(policies, results: dict, quick: bool, settings: EvalSettings, seed: i
         f"- Evaluation: {settings.describe()}; deterministic actions; seed {seed}; commit {_git_commit()}; "
         f"{started:%Y-%m-%d %H:%M}, {minutes:.1f} min",
         "- Evaluation overrides applied to each run's env.yaml (protocol §1.6): `"
-        + " ".join(eval_overrides(settings, "111")) + "`",
+        + " ".join(eval_overrides(settings, MiniCheetahOscCfg())) + "`",
         "- Falls: a robot's `terminated` flag (trunk contact > 1 N); it is then reset standing with a zero command.",
         "- Touchdowns (gait sections): contact-based, GRF > 0.1 body weight, 0.1 s debounce; RPD averaged "
         "(circular mean) over the last two complete RF cycles at each 5 s checkpoint; Transition beyond a "

@@ -35,6 +35,7 @@ import yaml
 from tensordict import TensorDict
 
 from gym_envs.config import apply_overrides, to_dict
+from gym_envs.evaluation import evaluation_overrides
 from gym_envs.legged_robot import REPO_ROOT
 from gym_envs.registry import make_env
 
@@ -175,7 +176,7 @@ class EvalSettings:
         )
 
 
-def eval_overrides(settings: EvalSettings, orc: str) -> list[str]:
+def eval_overrides(settings: EvalSettings, cfg) -> list[str]:
     """The `section.key=value` overrides that turn a training config into the evaluation setting.
 
     Coupling: None keeps the trained value; otherwise only the moving coupling changes
@@ -183,27 +184,14 @@ def eval_overrides(settings: EvalSettings, orc: str) -> list[str]:
     C=0 has no coupling at all in this implementation, so sigma > 0 also switches its C bit on;
     O and R are kept, so observations and rewards stay those the policy was trained with.
     """
-    overrides = [
-        "push.enabled=false",
-        "commands.resampling_time_s=1.0e12",
-        "commands.lin_vel_x_choices=[]",
-        "commands.lin_vel_x=[0.0, 0.0]",
-        "commands.lin_vel_x_noise=0.0",
-        "commands.lin_vel_y=[0.0, 0.0]",
-        "commands.yaw_rate=[0.0, 0.0]",
+    overrides = evaluation_overrides(cfg, observation_noise=settings.observation_noise) + [
         f"env.episode_length_s={float(settings.episode_length_s)!r}",
-        "domain_rand.randomize_friction=false",
-        "domain_rand.randomize_base_mass=false",
-        "domain_rand.randomize_base_com=false",
-        "init_state.mode=default",
         f"osc.init={settings.phase_init}",
-        "osc.omega_noise_std=0.0",
-        "osc.coupling_noise_std=0.0",
         f"osc.process_noise_std={float(settings.process_noise_std)!r}",
-        f"observations.noise_scale={1.0 if settings.observation_noise else 0.0}",
     ]
     if settings.coupling is not None:
         sigma = float(settings.coupling)
+        orc = str(cfg.osc.orc)
         if sigma > 0 and orc[2] == "0":
             overrides.append(f"osc.orc={orc[:2]}1")
         overrides.append(f"osc.coupling_max={sigma!r}")
@@ -213,7 +201,7 @@ def eval_overrides(settings: EvalSettings, orc: str) -> list[str]:
 def eval_env_cfg(run_cfg, settings: EvalSettings, num_envs: int, seed: int = 0, num_threads: int = 0):
     """A copy of the run's env config in the evaluation setting (the run's config is not modified)."""
     extra = [f"env.num_envs={int(num_envs)}", f"env.seed={int(seed)}", f"sim.num_threads={int(num_threads)}"]
-    return apply_overrides(run_cfg, eval_overrides(settings, str(run_cfg.osc.orc)) + extra)
+    return apply_overrides(run_cfg, eval_overrides(settings, run_cfg) + extra)
 
 
 def _cfg_key(task: str, cfg) -> str:

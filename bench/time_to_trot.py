@@ -22,37 +22,20 @@ import sys
 import tempfile
 import time
 
-import numpy as np
 import torch
 
 import train
-from analysis.gait import rpd_timeseries
-from analysis.rollout import EvalSettings, eval_env_cfg, rollout
+from analysis.locomotion import check_locomotion
 from gym_envs.config import save_yaml
 from learning import runs
 from learning.runs import DeterministicActor
 
-COMMAND = 1.0  # [m/s]
-WARMUP_S, MEASURE_S = 2.0, 10.0
 MAX_ERROR = 0.15  # [m/s]
 MIN_REGULAR_SHARE = 0.75
-REGULAR_GAITS = ("trot", "pronk")
 
 
-def evaluate(policy, env_cfg, num_envs: int, num_threads: int) -> dict:
-    cfg = eval_env_cfg(env_cfg, EvalSettings(), num_envs=num_envs, num_threads=num_threads)
-    dt = 1.0 / cfg.control.frequency_hz
-    warmup, steps = round(WARMUP_S / dt), round((WARMUP_S + MEASURE_S) / dt)
-    result = rollout(policy, cfg, steps, command=(COMMAND, 0.0, 0.0), record=("grf", "base_lin_vel", "terminated"),
-                     record_from=warmup, progress=False)
-    vx = result.data["base_lin_vel"][..., 0]
-    error = float(np.mean(np.abs(vx.mean(axis=1) - COMMAND)))
-    gaits = rpd_timeseries(result.data["grf"], dt=dt).labels[:, -1]
-    regular = float(np.isin(gaits, REGULAR_GAITS).mean())
-    falls = int(result.data["terminated"].any(axis=1).sum())
-    shares = {g: float(np.mean(gaits == g)) for g in sorted(set(gaits))}
-    return {"error": error, "falls": falls, "regular": regular, "gaits": shares,
-            "trots": error < MAX_ERROR and falls == 0 and regular >= MIN_REGULAR_SHARE}
+def trots(check) -> bool:
+    return check.tracking_error < MAX_ERROR and check.falls == 0 and check.regular_share >= MIN_REGULAR_SHARE
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -90,11 +73,11 @@ def main(argv: list[str] | None = None) -> int:
         runner.train(runner.current_learning_iteration + args.eval_every, init_at_random_ep_len=first)
         clock += time.perf_counter() - start
         it = runner.current_learning_iteration
-        result = evaluate(DeterministicActor(runner.alg.get_policy()), env_cfg, args.eval_envs, args.num_threads)
-        gaits = ", ".join(f"{g} {share:.0%}" for g, share in result["gaits"].items())
+        check = check_locomotion(DeterministicActor(runner.alg.get_policy()), env_cfg, command=1.0,
+                                 num_envs=args.eval_envs, num_threads=args.num_threads)
         print(f"eval | it {it} | {clock / 60:6.2f} min | {it * steps_per_iteration / 1e6:6.2f} M steps | "
-              f"tracking error {result['error']:.3f} m/s | falls {result['falls']} | gaits: {gaits}", flush=True)
-        if result["trots"]:
+              f"{check.summary()}", flush=True)
+        if trots(check):
             reached = clock / 60
             break
     runner.save(runs.checkpoint_path(run_dir, runner.current_learning_iteration))

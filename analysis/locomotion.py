@@ -1,0 +1,53 @@
+"""Does a policy walk? Velocity tracking, falls and gait of a batch of robots at one command.
+
+The quick check behind bench/time_to_trot.py and the shipped-policy manifest: robots start from
+the default pose with random oscillator phases in the evaluation setting (analysis.rollout), walk
+at a fixed forward command, and the measurement window follows a warm-up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis.gait import rpd_timeseries
+from analysis.rollout import EvalSettings, eval_env_cfg, rollout
+
+REGULAR_GAITS = ("trot", "pronk")
+
+
+@dataclass
+class LocomotionCheck:
+    tracking_error: float  # mean over robots of |mean forward velocity - command| [m/s]
+    mean_velocity: float  # [m/s], over robots and time
+    falls: int  # robots that fell at least once in the window
+    gaits: dict[str, float]  # share of robots per gait label at the last 5 s checkpoint
+    num_envs: int
+
+    @property
+    def regular_share(self) -> float:
+        return sum(self.gaits.get(g, 0.0) for g in REGULAR_GAITS)
+
+    def summary(self) -> str:
+        gaits = ", ".join(f"{g} {share:.0%}" for g, share in self.gaits.items())
+        return (f"tracking error {self.tracking_error:.3f} m/s (mean v_x {self.mean_velocity:.3f}) | "
+                f"falls {self.falls}/{self.num_envs} | gaits: {gaits}")
+
+
+def check_locomotion(policy, env_cfg, command: float = 1.0, warmup_s: float = 2.0, measure_s: float = 10.0,
+                     num_envs: int = 16, num_threads: int = 0, seed: int = 0) -> LocomotionCheck:
+    cfg = eval_env_cfg(env_cfg, EvalSettings(), num_envs=num_envs, seed=seed, num_threads=num_threads)
+    dt = 1.0 / cfg.control.frequency_hz
+    warmup, steps = round(warmup_s / dt), round((warmup_s + measure_s) / dt)
+    result = rollout(policy, cfg, steps, command=(command, 0.0, 0.0), record=("grf", "base_lin_vel", "terminated"),
+                     record_from=warmup, progress=False)
+    vx = result.data["base_lin_vel"][..., 0]
+    labels = rpd_timeseries(result.data["grf"], dt=dt).labels[:, -1]
+    return LocomotionCheck(
+        tracking_error=float(np.mean(np.abs(vx.mean(axis=1) - command))),
+        mean_velocity=float(vx.mean()),
+        falls=int(result.data["terminated"].any(axis=1).sum()),
+        gaits={str(g): float(np.mean(labels == g)) for g in sorted(set(labels))},
+        num_envs=num_envs,
+    )

@@ -1,0 +1,75 @@
+"""Training curves of a sweep's runs: reward, tracking error and episode length against env steps.
+
+    python tools/plot_training_curves.py --runs logs/sweep --out docs/training_curves.png
+
+Reads each run's tensorboard events (ORC_<xyz>/seed<k>/) and draws one line per configuration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # noqa: E402
+
+from gym_envs.config import load_yaml  # noqa: E402
+from gym_envs.orc import PAPER_CONFIGURATIONS  # noqa: E402
+from learning import runs  # noqa: E402
+from learning.runner_config import train_cfg_class  # noqa: E402
+
+PANELS = (
+    ("Train/mean_reward", "mean episode return"),
+    ("Episode/tracking_error", "tracking error [m/s]"),
+    ("Train/mean_episode_length", "episode length [steps]"),
+)
+
+
+def curves(run_dir: str) -> dict[str, tuple[list[float], list[float]]]:
+    """tag -> (env steps, values) over every event file of the run."""
+    train_cfg = load_yaml(train_cfg_class("mini_cheetah_osc"), os.path.join(run_dir, runs.TRAIN_YAML))
+    with open(os.path.join(run_dir, runs.ENV_YAML)) as f:
+        num_envs = next(int(line.split(":")[1]) for line in f if line.strip().startswith("num_envs:"))
+    steps_per_iteration = num_envs * train_cfg.num_steps_per_env
+    out: dict[str, dict[int, float]] = {tag: {} for tag, _ in PANELS}
+    for path in sorted(glob.glob(os.path.join(run_dir, "events.out.tfevents.*"))):
+        acc = EventAccumulator(path)
+        acc.Reload()
+        for tag in out:
+            if tag in acc.Tags()["scalars"]:
+                out[tag].update({e.step: e.value for e in acc.Scalars(tag)})
+    return {tag: ([(s + 1) * steps_per_iteration for s in sorted(v)], [v[s] for s in sorted(v)])
+            for tag, v in out.items()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", required=True)
+    parser.add_argument("--out", default="docs/training_curves.png")
+    args = parser.parse_args(argv)
+    fig, axes = plt.subplots(1, len(PANELS), figsize=(10, 3.0), constrained_layout=True)
+    for orc in PAPER_CONFIGURATIONS:
+        for run_dir in sorted(glob.glob(os.path.join(args.runs, f"ORC_{orc}", "seed*"))):
+            data = curves(run_dir)
+            for ax, (tag, _) in zip(axes, PANELS):
+                steps, values = data[tag]
+                ax.plot([s / 1e6 for s in steps], values, lw=1.0, label=f"ORC {orc}")
+    for ax, (_, label) in zip(axes, PANELS):
+        ax.set_xlabel("env steps [millions]")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    unique = dict(zip(labels, handles))
+    fig.legend(unique.values(), unique.keys(), loc="outside lower center", ncol=7, fontsize=8, frameon=False)
+    fig.savefig(args.out, dpi=150)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
