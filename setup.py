@@ -7,7 +7,7 @@ setup(
     license="BSD-3-Clause",
     python_requires=">=3.10",
     packages=find_packages(include=["gym_envs*", "learning*", "analysis*"]),
-    py_modules=["train", "play"],
+    py_modules=["train", "play", "sweep"],
     include_package_data=True,
     package_data={"": ["*.xml"]},
     install_requires=[

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.gait import rpd_timeseries
+from analysis.gait import CHECKPOINT_INTERVAL, rpd_timeseries
 from analysis.rollout import EvalSettings, eval_env_cfg, rollout
 
 REGULAR_GAITS = ("trot", "pronk")
@@ -37,6 +37,8 @@ class LocomotionCheck:
 
 def check_locomotion(policy, env_cfg, command: float = 1.0, warmup_s: float = 2.0, measure_s: float = 10.0,
                      num_envs: int = 16, num_threads: int = 0, seed: int = 0) -> LocomotionCheck:
+    if measure_s < CHECKPOINT_INTERVAL:
+        raise ValueError(f"measure_s={measure_s} is shorter than one {CHECKPOINT_INTERVAL:g} s gait checkpoint")
     cfg = eval_env_cfg(env_cfg, EvalSettings(), num_envs=num_envs, seed=seed, num_threads=num_threads)
     dt = 1.0 / cfg.control.frequency_hz
     warmup, steps = round(warmup_s / dt), round((warmup_s + measure_s) / dt)

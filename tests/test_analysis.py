@@ -264,3 +264,18 @@ def test_report_with_an_empty_runs_folder_is_a_one_line_error(tmp_path, capsys):
     assert exit_info.value.code == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: no runs in") and "\n" not in err
+
+
+def test_locomotion_check_of_a_standing_policy():
+    from analysis.locomotion import check_locomotion
+
+    run = _tiny_run("111")
+
+    def stand(obs):
+        return torch.zeros(obs.batch_size[0], 12)
+
+    check = check_locomotion(stand, run.env_cfg, command=1.0, warmup_s=0.5, measure_s=5.0, num_envs=3,
+                             num_threads=1)
+    assert check.falls == 0 and abs(check.mean_velocity) < 0.1
+    assert check.tracking_error == pytest.approx(1.0, abs=0.1)  # it stands while asked to walk at 1 m/s
+    assert check.gaits == {"transition": 1.0} and check.regular_share == 0.0  # no footfalls, no gait
