@@ -24,6 +24,7 @@ import yaml
 
 import train
 from gym_envs.config import ConfigError, apply_overrides, load_yaml, save_yaml, to_dict
+from gym_envs.files import atomic_write
 from gym_envs.orc import PAPER_CONFIGURATIONS, parse_orc
 from gym_envs.sim import SimSetupError
 from learning import runs
@@ -132,10 +133,8 @@ def load_yaml_dict(path: str) -> dict:
 
 
 def save_status(status: dict, path: str) -> None:
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
+    with atomic_write(path) as f:
         yaml.safe_dump(status, f, sort_keys=False)
-    os.replace(tmp, path)
 
 
 def write_manifest(out: str) -> str:
@@ -146,12 +145,10 @@ def write_manifest(out: str) -> str:
         run_dir = os.path.dirname(status_path)
         rows.append({**{k: status.get(k, "") for k in FIELDS}, "run_dir": os.path.relpath(run_dir, out)})
     path = os.path.join(out, MANIFEST)
-    tmp = path + ".tmp"
-    with open(tmp, "w", newline="") as f:
+    with atomic_write(path) as f:
         writer = csv.DictWriter(f, fieldnames=FIELDS)
         writer.writeheader()
         writer.writerows(rows)
-    os.replace(tmp, path)
     return path
 
 

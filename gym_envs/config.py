@@ -27,13 +27,14 @@ import difflib
 import functools
 import os
 import re
-import tempfile
 import types
 import typing
 from collections.abc import Mapping
 from typing import Any, Literal, Union
 
 import yaml
+
+from gym_envs.files import atomic_write
 
 __all__ = ["ConfigError", "to_dict", "from_dict", "apply_overrides", "save_yaml", "load_yaml"]
 
@@ -418,20 +419,8 @@ def save_yaml(cfg: Any, path: str | os.PathLike) -> None:
     # Round-trip through from_dict first: a config that load_yaml would reject is refused here, not at load time.
     data = to_dict(from_dict(type(cfg), to_dict(cfg)))
     text = yaml.dump(data, Dumper=_Dumper, sort_keys=False, default_flow_style=False, allow_unicode=True)
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp_path = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp_path, 0o644)
-        os.replace(tmp_path, path)
-    except BaseException:
-        if os.path.exists(tmp_path):
-            os.unlink(tmp_path)
-        raise
+    with atomic_write(path) as f:
+        f.write(text)
 
 
 def load_yaml(cls: type, path: str | os.PathLike) -> Any:

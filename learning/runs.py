@@ -20,7 +20,6 @@ from __future__ import annotations
 import datetime
 import os
 import re
-import tempfile
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,6 +27,7 @@ import torch
 import yaml
 
 from gym_envs.config import ConfigError
+from gym_envs.files import atomic_write
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_LOG_ROOT = os.path.join(REPO_ROOT, "logs")
@@ -99,19 +99,8 @@ def list_checkpoints(run_dir: str) -> list[int]:
 
 def save_checkpoint(data: dict, path: str) -> None:
     """torch.save to a temporary file beside `path`, then os.replace: readers never see half a file."""
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(data, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path, binary=True) as f:
+        torch.save(data, f)
 
 
 def load_checkpoint(path: str, map_location: str | torch.device | None = None) -> dict:
