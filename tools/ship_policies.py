@@ -34,9 +34,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=runs.POLICY_ROOT)
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--machine", required=True, help="what trained the runs, for the manifest")
+    parser.add_argument("--commit", default=None, help="the commit that trained the runs (default: HEAD)")
     parser.add_argument("--num_threads", type=int, default=2)
     args = parser.parse_args(argv)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    commit = args.commit or subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                                           text=True).stdout.strip()
     rows = []
     for orc in PAPER_CONFIGURATIONS:
         folder = os.path.join(args.runs, f"ORC_{orc}")
