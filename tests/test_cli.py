@@ -179,7 +179,6 @@ def test_train_bad_inputs(trained, capsys, argv, pattern):
         (["--checkpoint", "99"], r"has no checkpoint 99; available iterations: 0, 2"),
         (["--set", "osc.coupling_mx=0"], r"did you mean 'osc.coupling_max'"),
         (["--orc", "011", "--load_run", "RUN"], r"expects 53 actor .* gives 45 / 49; likely cause: the ORC O-bit"),
-        (["--orc", "010"], r"no run with a checkpoint .* orc=010.* no shipped policy at .*ORC_010"),
     ],
 )
 def test_play_bad_inputs(trained, capsys, argv, pattern):
@@ -189,6 +188,20 @@ def test_play_bad_inputs(trained, capsys, argv, pattern):
     code = play.main([*argv, "--log_root", str(root), "--headless", "--export", "--num_envs", "2"])
     _assert_one_line_error(capsys, code, pattern)
     assert snapshot(root) == before
+
+
+def test_play_without_runs_or_shipped_policy_is_one_line(trained, capsys, monkeypatch, tmp_path):
+    root, _ = trained
+    monkeypatch.setattr(runs, "POLICY_ROOT", str(tmp_path / "no_policies"))
+    code = play.main(["--orc", "010", "--log_root", str(root), "--headless", "--num_envs", "2"])
+    _assert_one_line_error(capsys, code, r"no run with a checkpoint .* orc=010.* no shipped policy at .*ORC_010")
+
+
+def test_play_falls_back_to_the_shipped_policy(tmp_path, capsys):
+    code = play.main(["--task", "mini_cheetah_osc", "--orc", "010", "--log_root", str(tmp_path), "--headless",
+                      "--num_envs", "2", "--duration", "0.2", "--num_threads", "1"])
+    assert code == 0
+    assert os.path.join("resources", "policies", "ORC_010") in capsys.readouterr().out
 
 
 def test_ctrl_c_saves_a_checkpoint_and_exits_130(tmp_path):
