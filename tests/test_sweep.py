@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import os
+import sys
 
 import pytest
 import torch
@@ -54,6 +55,15 @@ def test_sweep_trains_skips_and_resumes(tmp_path):
     row = manifest(tmp_path)[("111", "3")]
     assert row["iterations"] == "2" and float(row["wall_time_s"]) > first_wall
     assert os.listdir(tmp_path / "ORC_111") == ["seed3"]  # no second folder for the resumed run
+
+    # The runs' curves, read back from their event files (both tensorboard files of the resumed run).
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
+    import plot_training_curves
+
+    steps, rewards = plot_training_curves.curves(str(run_dir))["Train/mean_reward"]
+    assert steps == [16 * 4, 2 * 16 * 4]  # iterations 1 and 2, in env steps
+    assert plot_training_curves.main(["--runs", str(tmp_path), "--out", str(tmp_path / "curves.png")]) == 0
+    assert (tmp_path / "curves.png").stat().st_size > 10_000
 
 
 def test_resuming_with_other_settings_is_refused(tmp_path, capsys):
