@@ -85,64 +85,64 @@ _OTHER_PAIR_CONTACTS = 8  # generous bound for any other pair (meshes, box-box)
 # --- kernels ------------------------------------------------------------------------------------
 
 
+@wp.struct
+class _Home:
+    """The 'home' keyframe a reset writes."""
+
+    qpos: wp.array(dtype=wp.float32)
+    qvel: wp.array(dtype=wp.float32)
+    act: wp.array(dtype=wp.float32)
+    ctrl: wp.array(dtype=wp.float32)
+    time: float
+
+
+@wp.struct
+class _WorldState:
+    """Every MJWarp data field carried from one step to the next for the models we accept."""
+
+    qpos: wp.array2d(dtype=wp.float32)
+    qvel: wp.array2d(dtype=wp.float32)
+    act: wp.array2d(dtype=wp.float32)
+    ctrl: wp.array2d(dtype=wp.float32)
+    qacc_warmstart: wp.array2d(dtype=wp.float32)
+    qfrc_applied: wp.array2d(dtype=wp.float32)
+    xfrc_applied: wp.array2d(dtype=wp.spatial_vector)
+    time: wp.array(dtype=wp.float32)
+
+
 @wp.func
 def _reset_world(
     w: int,
-    home_qpos: wp.array(dtype=wp.float32),
-    home_qvel: wp.array(dtype=wp.float32),
-    home_act: wp.array(dtype=wp.float32),
-    home_ctrl: wp.array(dtype=wp.float32),
-    home_time: float,
-    qpos: wp.array2d(dtype=wp.float32),
-    qvel: wp.array2d(dtype=wp.float32),
-    act: wp.array2d(dtype=wp.float32),
-    ctrl: wp.array2d(dtype=wp.float32),
-    qacc_warmstart: wp.array2d(dtype=wp.float32),
-    qfrc_applied: wp.array2d(dtype=wp.float32),
-    xfrc_applied: wp.array2d(dtype=wp.spatial_vector),
-    time: wp.array(dtype=wp.float32),
+    home: _Home,
+    state: _WorldState,
     termination: wp.array(dtype=wp.float32),
 ):
-    for i in range(qpos.shape[1]):
-        qpos[w, i] = home_qpos[i]
-    for i in range(qvel.shape[1]):
-        qvel[w, i] = home_qvel[i]
-        qacc_warmstart[w, i] = 0.0
-        qfrc_applied[w, i] = 0.0
-    for i in range(act.shape[1]):
-        act[w, i] = home_act[i]
-    for i in range(ctrl.shape[1]):
-        ctrl[w, i] = home_ctrl[i]
-    for b in range(xfrc_applied.shape[1]):
-        xfrc_applied[w, b] = wp.spatial_vector(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    time[w] = home_time
+    for i in range(state.qpos.shape[1]):
+        state.qpos[w, i] = home.qpos[i]
+    for i in range(state.qvel.shape[1]):
+        state.qvel[w, i] = home.qvel[i]
+        state.qacc_warmstart[w, i] = 0.0
+        state.qfrc_applied[w, i] = 0.0
+    for i in range(state.act.shape[1]):
+        state.act[w, i] = home.act[i]
+    for i in range(state.ctrl.shape[1]):
+        state.ctrl[w, i] = home.ctrl[i]
+    for b in range(state.xfrc_applied.shape[1]):
+        state.xfrc_applied[w, b] = wp.spatial_vector(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    state.time[w] = home.time
     termination[w] = 0.0
 
 
 @wp.kernel
 def _reset_masked(
     mask: wp.array(dtype=wp.bool),
-    home_qpos: wp.array(dtype=wp.float32),
-    home_qvel: wp.array(dtype=wp.float32),
-    home_act: wp.array(dtype=wp.float32),
-    home_ctrl: wp.array(dtype=wp.float32),
-    home_time: float,
-    qpos: wp.array2d(dtype=wp.float32),
-    qvel: wp.array2d(dtype=wp.float32),
-    act: wp.array2d(dtype=wp.float32),
-    ctrl: wp.array2d(dtype=wp.float32),
-    qacc_warmstart: wp.array2d(dtype=wp.float32),
-    qfrc_applied: wp.array2d(dtype=wp.float32),
-    xfrc_applied: wp.array2d(dtype=wp.spatial_vector),
-    time: wp.array(dtype=wp.float32),
+    home: _Home,
+    state: _WorldState,
     termination: wp.array(dtype=wp.float32),
 ):
     w = wp.tid()
     if mask[w]:
-        _reset_world(
-            w, home_qpos, home_qvel, home_act, home_ctrl, home_time,
-            qpos, qvel, act, ctrl, qacc_warmstart, qfrc_applied, xfrc_applied, time, termination,
-        )
+        _reset_world(w, home, state, termination)
 
 
 @wp.kernel
@@ -186,19 +186,8 @@ def _finish_step(
     bad: wp.array(dtype=wp.int32),
     sensordata: wp.array2d(dtype=wp.float32),
     termination_adr: wp.array(dtype=wp.int32),
-    home_qpos: wp.array(dtype=wp.float32),
-    home_qvel: wp.array(dtype=wp.float32),
-    home_act: wp.array(dtype=wp.float32),
-    home_ctrl: wp.array(dtype=wp.float32),
-    home_time: float,
-    qpos: wp.array2d(dtype=wp.float32),
-    qvel: wp.array2d(dtype=wp.float32),
-    act: wp.array2d(dtype=wp.float32),
-    ctrl: wp.array2d(dtype=wp.float32),
-    qacc_warmstart: wp.array2d(dtype=wp.float32),
-    qfrc_applied: wp.array2d(dtype=wp.float32),
-    xfrc_applied: wp.array2d(dtype=wp.spatial_vector),
-    time: wp.array(dtype=wp.float32),
+    home: _Home,
+    state: _WorldState,
     foot_forces: wp.array3d(dtype=wp.float32),
     joint_torques: wp.array3d(dtype=wp.float32),
     termination: wp.array(dtype=wp.float32),
@@ -208,10 +197,7 @@ def _finish_step(
     w = wp.tid()
     if bad[w] != 0:
         diverged[w] = True
-        _reset_world(
-            w, home_qpos, home_qvel, home_act, home_ctrl, home_time,
-            qpos, qvel, act, ctrl, qacc_warmstart, qfrc_applied, xfrc_applied, time, termination,
-        )
+        _reset_world(w, home, state, termination)
         for s in range(foot_forces.shape[1]):
             for f in range(foot_forces.shape[2]):
                 foot_forces[w, s, f] = 0.0
@@ -271,16 +257,15 @@ class MujocoWarpBackend(MujocoModelBackend):
             nconmax, njmax = _constraint_capacity(m)
             self.warp_data = mjw.make_data(m, nworld=num_envs, nconmax=nconmax, njmax=njmax)
             home = self._home_key
-            self._home = {
-                name: wp.array(np.asarray(values, dtype=np.float32).ravel(), dtype=wp.float32)
-                for name, values in (
-                    ("qpos", m.key_qpos[home]),
-                    ("qvel", m.key_qvel[home]),
-                    ("act", m.key_act[home]),
-                    ("ctrl", m.key_ctrl[home]),
-                )
-            }
-            self._home_time = float(m.key_time[home])
+            self._home_struct = _Home()
+            for name, values in (("qpos", m.key_qpos), ("qvel", m.key_qvel), ("act", m.key_act), ("ctrl", m.key_ctrl)):
+                setattr(self._home_struct, name, wp.array(np.asarray(values[home], dtype=np.float32).ravel(),
+                                                          dtype=wp.float32))
+            self._home_struct.time = float(m.key_time[home])
+            d = self.warp_data
+            self._state_struct = _WorldState()
+            for name in ("qpos", "qvel", "act", "ctrl", "qacc_warmstart", "qfrc_applied", "xfrc_applied", "time"):
+                setattr(self._state_struct, name, getattr(d, name))
             self._foot_adr = wp.array(self._foot_rows[:, 0].astype(np.int32), dtype=wp.int32)
             self._termination_adr = wp.array(self._termination_rows[:, 0].astype(np.int32), dtype=wp.int32)
             self._bad = wp.zeros(num_envs, dtype=wp.int32)
@@ -372,8 +357,8 @@ class MujocoWarpBackend(MujocoModelBackend):
         wp.launch(
             _finish_step,
             dim=self.num_envs,
-            inputs=[self._bad, d.sensordata, self._termination_adr, *self._home_inputs()],
-            outputs=[*self._state_outputs(), forces, torques, self._termination, self._diverged],
+            inputs=[self._bad, d.sensordata, self._termination_adr, self._home_struct, self._state_struct],
+            outputs=[forces, torques, self._termination, self._diverged],
         )
 
     def _record_buffers(self, num_substeps: int) -> tuple:
@@ -467,14 +452,6 @@ class MujocoWarpBackend(MujocoModelBackend):
             yield
         torch_stream.wait_stream(self._stream)
 
-    def _home_inputs(self) -> list:
-        h = self._home
-        return [h["qpos"], h["qvel"], h["act"], h["ctrl"], self._home_time]
-
-    def _state_outputs(self) -> list:
-        d = self.warp_data
-        return [d.qpos, d.qvel, d.act, d.ctrl, d.qacc_warmstart, d.qfrc_applied, d.xfrc_applied, d.time]
-
     def _reset_to_home(self, ids: torch.Tensor) -> None:
         self._reset_mask_t.zero_()
         self._reset_mask_t[ids] = True
@@ -482,8 +459,8 @@ class MujocoWarpBackend(MujocoModelBackend):
             wp.launch(
                 _reset_masked,
                 dim=self.num_envs,
-                inputs=[self._reset_mask, *self._home_inputs()],
-                outputs=[*self._state_outputs(), self._termination],
+                inputs=[self._reset_mask, self._home_struct, self._state_struct],
+                outputs=[self._termination],
             )
 
     def _reset_all_to_home(self) -> None:
