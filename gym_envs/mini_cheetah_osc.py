@@ -38,6 +38,9 @@ class OscillatorCfg:
     omega_noise_std: float = 0.25  # training jitter of omega, redrawn every control step
     coupling_noise_std: float = 0.25
     coupling_max: float = 1.0  # sigma while moving
+    # Share of training episodes run with sigma = 0 throughout (standing too): those robots keep
+    # whatever phase offsets they start with, so the policy keeps seeing every relative phase.
+    coupling_off_prob: float = 0.0
     stand_threshold: float = 0.5  # |v_x| below this uses the standing parameters
     # Quirk switches of the released code, off by default:
     hold_grf: bool = False  # integrate all substeps with the previous control step's last force
@@ -152,6 +155,7 @@ class MiniCheetahOsc(MiniCheetah):
         self.omega = torch.zeros(n, 1, device=dev)
         self.coupling = torch.zeros(n, 1, device=dev)
         self.offset = torch.zeros(n, 1, device=dev)
+        self.coupling_on = torch.ones(n, 1, device=dev)  # 0 for episodes drawn with sigma = 0
 
     def _pre_physics_step(self) -> None:
         osc = self.cfg.osc
@@ -164,6 +168,8 @@ class MiniCheetahOsc(MiniCheetah):
             generator=self.generator,
             coupling_enabled=self.orc.coupling,
         )
+        if osc.coupling_off_prob > 0.0:
+            self.coupling = self.coupling * self.coupling_on
 
     def _after_physics(self) -> None:
         grf = torch.clamp(self.foot_forces / self.grf_normaliser, 0.0, 1.0)  # (N, substeps, legs)
@@ -180,6 +186,20 @@ class MiniCheetahOsc(MiniCheetah):
         )
         self.phase_vel[env_ids] = 0.0
         self.grf[env_ids] = 0.0
+        if self.cfg.osc.coupling_off_prob > 0.0:
+            draw = torch.rand(len(env_ids), 1, generator=self.generator, device=self.device)
+            self.coupling_on[env_ids] = (draw >= self.cfg.osc.coupling_off_prob).float()
+
+    def _log_episodes(self, env_ids: torch.Tensor) -> None:
+        super()._log_episodes(env_ids)
+        # Which relative phases the moving robots' oscillators hold right now: if coupling pulls every
+        # robot into one pattern, the policy never sees (and never learns to follow) the others.
+        moving = self.commands[:, 0].abs() >= self.cfg.osc.stand_threshold
+        if moving.any():
+            labels, _ = oscillators.classify_rpd(oscillators.relative_phases(self.phase[moving]))
+            shares = torch.bincount(labels, minlength=len(oscillators.GAIT_NAMES) + 1).float() / len(labels)
+            for name, share in zip(oscillators.GAIT_NAMES + ("transition",), shares):
+                self.extras["log"][f"Oscillator_gait/{name}"] = share
 
     # observations: cos block then sin block, as in the released code
     def _obs_oscillator_obs(self):

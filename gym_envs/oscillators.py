@@ -37,6 +37,9 @@ _GAIT_RPD = {
     "pronk": (0.0, 0.0, 0.0),
 }
 PHASE_INIT_MODES = ("random", "trot", "pace", "bound", "pronk", "standing")
+GAIT_NAMES = tuple(_GAIT_RPD)
+# Farther than this (wrapped Euclidean distance in RPD space) from every ideal gait is a transition.
+TRANSITION_DISTANCE = 2.0
 
 
 def oscillator_velocity(phase, grf, omega, coupling, offset):
@@ -125,6 +128,34 @@ def integrate_phases(
     # remainder() can round a tiny negative value up to exactly 2*pi in float32.
     phase = torch.where(phase >= TWO_PI, phase - TWO_PI, phase)
     return phase, vel
+
+
+def relative_phases(phase: torch.Tensor) -> torch.Tensor:
+    """RPD of LF, RH, LH with respect to RF, (..., 3) in [0, 2*pi): (phi_RF - phi_j) mod 2*pi."""
+    return torch.remainder(phase[..., :1] - phase[..., 1:], TWO_PI)
+
+
+def gait_distances(rpd: torch.Tensor) -> torch.Tensor:
+    """Wrapped Euclidean distances (..., 4) from RPD vectors (..., 3) to the ideal gaits (GAIT_NAMES order).
+
+    Per component the distance is min(|a - b| mod 2*pi, 2*pi - that), so 6.2 rad is 0.08 from 0.
+    """
+    ideal = torch.tensor(list(_GAIT_RPD.values()), dtype=rpd.dtype, device=rpd.device)
+    d = torch.remainder(torch.abs(rpd.unsqueeze(-2) - ideal), TWO_PI)
+    return torch.linalg.vector_norm(torch.minimum(d, TWO_PI - d), dim=-1)
+
+
+def classify_rpd(rpd: torch.Tensor, max_distance: float = TRANSITION_DISTANCE):
+    """(index into GAIT_NAMES, or len(GAIT_NAMES) for a transition; distance to the nearest gait).
+
+    A NaN RPD (no valid measurement) is a transition with distance NaN.
+    """
+    d = gait_distances(rpd)
+    dist, idx = torch.min(torch.nan_to_num(d, nan=float("inf")), dim=-1)
+    invalid = torch.isnan(rpd).any(dim=-1)
+    dist = torch.where(invalid, torch.full_like(dist, float("nan")), dist)
+    idx = torch.where(invalid | (dist > max_distance), torch.full_like(idx, len(GAIT_NAMES)), idx)
+    return idx, dist
 
 
 def initial_phases(
