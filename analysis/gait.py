@@ -1,20 +1,25 @@
 """Gait metrics: touchdowns, relative phase differences (RPD) and gait classification.
 
-Follows analysis protocol §3 (paper Sec. II-A). Pure numpy, no simulator. Inputs are logged once per
-control step: GRF arrays of shape (T, 4) (or (N, T, 4) for N robots), legs ordered RF, LF, RH, LH,
-GRF normalised by body weight. Sample k is taken at time (k + 1) * dt, i.e. right after control
-step k + 1, as the protocols log.
+Follows analysis protocol §3 as corrected (paper Sec. II-A). Pure numpy, no simulator. Inputs are
+logged once per control step: GRF arrays of shape (T, 4) (or (N, T, 4) for N robots), legs ordered
+RF, LF, RH, LH, GRF normalised by body weight. Sample k is taken at time (k + 1) * dt.
 
-Definitions used (the paper leaves the first four open; they are reproduction choices):
-- touchdown: contact c = GRF > 0.1 switches 0 -> 1; a touchdown less than 0.1 s after the previous
-  accepted one of the same leg is chatter and ignored. Oscillator-based alternative: phi passes pi.
-- gait cycle k: from RF touchdown t_k to t_{k+1}. RPD_j = 2*pi*(tau_j - t_k)/(t_{k+1} - t_k) in
-  [0, 2*pi), tau_j the first touchdown of leg j in [t_k, t_{k+1}); a cycle without one is invalid.
-- checkpoints every 5 s: circular mean of the RPD of the last two complete cycles ending at or before
-  the checkpoint; a checkpoint with fewer than two cycles or an invalid cycle is invalid.
-- distance: wrapped per component, delta(a, b) = min(|a-b| mod 2pi, 2pi - |a-b| mod 2pi), then the
-  Euclidean norm over (LF, RH, LH). Nearest ideal gait, 'transition' if the distance exceeds 2
-  (paper: "exceeds 2", so exactly 2 still counts as the gait). Invalid/NaN RPD -> 'transition'.
+Definitions (the paper leaves the first three open; they are reproduction choices):
+- touchdown (contact method): GRF rises above 0.1 body weight after the foot was unloaded
+  (GRF <= 0.1) for at least MIN_SWING_TIME. The hysteresis rejects a force that dips to the
+  threshold and rises again as the foot leaves the ground, which a minimum interval between
+  touchdowns cannot (one stance lasts longer than any interval short enough to keep real steps).
+  Phase method: the oscillator phase passes pi (the start of its stance half).
+- RF touchdowns t_0 < t_1 < ... bound the gait cycles. Every touchdown tau of leg j in LF, RH, LH gets
+  the phase 2*pi*(tau - t_k)/(t_{k+1} - t_k) in the cycle [t_k, t_{k+1}) that contains it. A window's
+  RPD of leg j is the circular mean of the phases of its touchdowns in the window, so a leg landing
+  in phase with RF (a sample before RF in one cycle, on the same sample in the next) is measured
+  right although some cycles hold two of its touchdowns and some none.
+- checkpoints every 5 s: the window is the last two complete RF cycles ending at or before it. A
+  window with fewer than two cycles, or in which some leg never touched down (held up, dragging), is
+  invalid: labelled 'transition' and counted apart (GaitTimeseries.valid).
+- distance: wrapped per component, then the Euclidean norm over (LF, RH, LH); nearest ideal gait,
+  'transition' beyond 2 (gym_envs.oscillators.classify_rpd, shared with the training diagnostics).
 """
 
 from __future__ import annotations
@@ -23,26 +28,23 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+import torch
+
+from gym_envs import oscillators
 
 TWO_PI = 2.0 * math.pi
 DT = 0.01  # control step [s]
 CONTACT_THRESHOLD = 0.1  # body weights (protocol §3: the codebase's only contact threshold)
-MIN_TOUCHDOWN_INTERVAL = 0.1  # s, chatter rejection
+MIN_SWING_TIME = 0.05  # s the foot must be unloaded before a rise counts as a touchdown
 CHECKPOINT_INTERVAL = 5.0  # s
 CYCLES_PER_CHECKPOINT = 2
-TRANSITION_DISTANCE = 2.0
+TRANSITION_DISTANCE = oscillators.TRANSITION_DISTANCE
 
 # RPD of (LF, RH, LH) relative to RF: paper Sec. II-A, protocol §3.
-IDEAL_GAITS = {
-    "trot": np.array([math.pi, math.pi, 0.0]),
-    "pace": np.array([math.pi, 0.0, math.pi]),
-    "bound": np.array([0.0, math.pi, math.pi]),
-    "pronk": np.array([0.0, 0.0, 0.0]),
-}
+IDEAL_GAITS = {name: np.array(rpd) for name, rpd in oscillators.IDEAL_RPD.items()}
 TRANSITION = "transition"
 GAIT_LABELS = tuple(IDEAL_GAITS) + (TRANSITION,)
-_IDEAL_MATRIX = np.stack(list(IDEAL_GAITS.values()))  # (4 gaits, 3)
-_IDEAL_NAMES = np.array(list(IDEAL_GAITS), dtype="<U10")
+_LABEL_NAMES = np.array(GAIT_LABELS, dtype="<U10")
 
 
 # --- angles -----------------------------------------------------------------------------------
@@ -72,18 +74,23 @@ def circular_mean(angles, axis=0):
 # --- touchdowns -------------------------------------------------------------------------------
 
 
-def touchdowns(grf, threshold=CONTACT_THRESHOLD, dt=DT, min_interval=MIN_TOUCHDOWN_INTERVAL):
+def touchdowns(grf, threshold=CONTACT_THRESHOLD, dt=DT, min_swing=MIN_SWING_TIME):
     """Touchdown sample indices per leg (list of 4 int arrays) from a (T, 4) GRF array.
 
-    A touchdown is a step t with GRF[t] > threshold and GRF[t-1] <= threshold (a contact at t = 0 is
-    not one). Touchdowns closer than min_interval [s] to the previous accepted one are dropped.
+    A touchdown is a sample t with GRF[t] > threshold after at least min_swing [s] of samples with
+    GRF <= threshold (the unloaded stretch may begin with the record). A contact at t = 0 is none.
     """
     grf = np.asarray(grf, float)
     if grf.ndim != 2 or grf.shape[1] != 4:
         raise ValueError(f"expected GRF of shape (T, 4), got {grf.shape}")
     contact = grf > threshold
-    rises = contact[1:] & ~contact[:-1]
-    return [_debounce(np.flatnonzero(rises[:, i]) + 1, dt, min_interval) for i in range(4)]
+    steps = np.arange(len(grf))[:, None]
+    # Index of the latest loaded sample at or before each t (-1 before the first one).
+    last_loaded = np.maximum.accumulate(np.where(contact, steps, -1), axis=0)
+    swing = steps[1:] - 1 - last_loaded[:-1]  # unloaded samples right before sample t = 1 .. T-1
+    min_samples = int(math.ceil(min_swing / dt - 1e-9))
+    rises = contact[1:] & (swing >= max(min_samples, 1))
+    return [np.flatnonzero(rises[:, i]) + 1 for i in range(4)]
 
 
 def phase_touchdowns(phase):
@@ -96,75 +103,70 @@ def phase_touchdowns(phase):
     return [np.flatnonzero(crossed[:, i]) + 1 for i in range(phase.shape[1])]
 
 
+def stance_share(phase, grf) -> np.ndarray:
+    """Per leg, the share of its GRF impulse that falls in its own oscillator's stance half [pi, 2pi).
+
+    phase, grf: (..., T, 4); sums over the time axis. NaN for a leg that never carried load.
+    """
+    phase, grf = np.asarray(phase, float), np.asarray(grf, float)
+    total = grf.sum(axis=-2)
+    in_stance = (grf * (phase >= math.pi)).sum(axis=-2)
+    return np.divide(in_stance, total, out=np.full(total.shape, np.nan), where=total > 0)
+
+
 def oscillator_rpd(phase):
     """Instantaneous oscillator RPD (..., 3): (phi_RF - phi_j) mod 2pi for j = LF, RH, LH."""
     phase = np.asarray(phase, float)
     return np.mod(phase[..., :1] - phase[..., 1:], TWO_PI)
 
 
-def _debounce(idx, dt, min_interval):
-    if min_interval <= 0 or idx.size < 2:
-        return idx
-    keep, last = [], None
-    for i in idx:
-        if last is None or (i - last) * dt >= min_interval - 1e-9:
-            keep.append(i)
-            last = i
-    return np.asarray(keep, dtype=int)
+# --- footfall phases and RPD ------------------------------------------------------------------
 
 
-# --- cycles and RPD ---------------------------------------------------------------------------
+class Footfalls(NamedTuple):
+    rf: np.ndarray  # (K + 1,) RF touchdown samples; cycle k is [rf[k], rf[k + 1])
+    cycle: tuple[np.ndarray, np.ndarray, np.ndarray]  # per leg LF, RH, LH: cycle of each touchdown
+    phase: tuple[np.ndarray, np.ndarray, np.ndarray]  # per leg: its phase in that cycle, [0, 2pi)
 
 
-class GaitCycles(NamedTuple):
-    start: np.ndarray  # (K,) RF touchdown index opening each cycle
-    end: np.ndarray  # (K,) next RF touchdown index
-    rpd: np.ndarray  # (K, 3) RPD of LF, RH, LH in [0, 2pi); NaN where the leg did not touch down
-
-
-def relative_phase_differences(touchdown_steps):
-    """Per-cycle RPD from per-leg touchdown indices (as returned by touchdowns())."""
+def footfall_phases(touchdown_steps) -> Footfalls:
+    """Place every LF, RH and LH touchdown in the RF cycle that contains it (touchdowns outside every
+    complete cycle are dropped)."""
     rf = np.asarray(touchdown_steps[0], dtype=int)
-    start, end = rf[:-1], rf[1:]
-    rpd = np.full((start.size, 3), np.nan)
-    if start.size == 0:
-        return GaitCycles(start, end, rpd)
-    period = (end - start).astype(float)
-    for j in range(3):
-        td = np.asarray(touchdown_steps[j + 1], dtype=int)
-        if td.size == 0:
-            continue
-        pos = np.searchsorted(td, start, side="left")  # first touchdown at or after t_k
-        ok = pos < td.size
-        tau = np.where(ok, td[np.minimum(pos, td.size - 1)], -1)
-        ok &= tau < end
-        rpd[ok, j] = TWO_PI * (tau[ok] - start[ok]) / period[ok]
-    return GaitCycles(start, end, rpd)
+    cycles, phases = [], []
+    for j in range(1, 4):
+        td = np.asarray(touchdown_steps[j], dtype=int)
+        k = np.searchsorted(rf, td, side="right") - 1
+        inside = (k >= 0) & (k < rf.size - 1)
+        td, k = td[inside], k[inside]
+        cycles.append(k)
+        phases.append(TWO_PI * (td - rf[k]) / (rf[k + 1] - rf[k]) if k.size else np.zeros(0))
+    return Footfalls(rf, tuple(cycles), tuple(phases))
 
 
-def checkpoint_rpd(cycles: GaitCycles, checkpoint_steps, n_cycles=CYCLES_PER_CHECKPOINT):
-    """Circular mean RPD of the last n_cycles complete cycles with end <= each checkpoint index.
+def window_rpd(footfalls: Footfalls, last_samples, n_cycles=CYCLES_PER_CHECKPOINT):
+    """RPD (C, 3) over the last n_cycles complete RF cycles ending at or before each sample index.
 
-    Returns (rpd (C, 3) with NaN rows where invalid, valid (C,) bool).
+    Rows are NaN where the window is invalid: fewer than n_cycles cycles, or a leg without touchdown.
     """
-    checkpoint_steps = np.atleast_1d(np.asarray(checkpoint_steps))
-    out = np.full((checkpoint_steps.size, 3), np.nan)
-    n_done = np.searchsorted(cycles.end, checkpoint_steps, side="right")  # cycles ending at/before
+    last_samples = np.atleast_1d(np.asarray(last_samples))
+    out = np.full((last_samples.size, 3), np.nan)
+    n_done = np.searchsorted(footfalls.rf, last_samples, side="right") - 1  # cycles complete by then
     for c, n in enumerate(n_done):
         if n < n_cycles:
             continue
-        window = cycles.rpd[n - n_cycles : n]
-        if np.isnan(window).any():
-            continue
-        out[c] = circular_mean(window, axis=0)
-    return out, ~np.isnan(out).any(axis=1)
+        for j in range(3):
+            in_window = (footfalls.cycle[j] >= n - n_cycles) & (footfalls.cycle[j] < n)
+            if in_window.any():
+                out[c, j] = circular_mean(footfalls.phase[j][in_window])
+    return out
 
 
 class GaitTimeseries(NamedTuple):
     times: np.ndarray  # (C,) checkpoint times [s]
     rpd: np.ndarray  # (C, 3) or (N, C, 3); NaN where invalid
-    valid: np.ndarray  # (C,) or (N, C): enough complete cycles, every leg touched down
-    labels: np.ndarray  # (C,) or (N, C) gait names (GAIT_LABELS)
+    valid: np.ndarray  # (C,) or (N, C): two complete cycles in which every leg touched down
+    labels: np.ndarray  # (C,) or (N, C) gait names (GAIT_LABELS); invalid windows are 'transition'
     distance: np.ndarray  # (C,) or (N, C) distance to the nearest ideal gait (NaN where invalid)
 
 
@@ -175,13 +177,12 @@ def rpd_timeseries(
     n_cycles=CYCLES_PER_CHECKPOINT,
     method="contact",
     threshold=CONTACT_THRESHOLD,
-    min_interval=MIN_TOUCHDOWN_INTERVAL,
+    min_swing=MIN_SWING_TIME,
     max_distance=TRANSITION_DISTANCE,
 ):
     """RPD and gait label every `interval` s (checkpoints interval, 2*interval, ... <= T*dt).
 
     signal: GRF (method='contact') or oscillator phases (method='phase'), shape (T, 4) or (N, T, 4).
-    Each checkpoint averages the last n_cycles complete RF cycles ending at or before it.
     """
     x = np.asarray(signal, float)
     batched = x.ndim == 3
@@ -189,24 +190,20 @@ def rpd_timeseries(
         x = x[None]
     if x.ndim != 3 or x.shape[2] != 4:
         raise ValueError(f"expected shape (T, 4) or (N, T, 4), got {np.shape(signal)}")
+    if method not in ("contact", "phase"):
+        raise ValueError(f"unknown method {method!r}; use 'contact' or 'phase'")
     n_steps = x.shape[1]
     n_check = int(math.floor(n_steps * dt / interval + 1e-9))
     times = interval * np.arange(1, n_check + 1)
-    # Sample k is at (k + 1) * dt, so a cycle ending at sample `end` is complete by (end + 1) * dt.
+    # Sample k is at (k + 1) * dt: the last sample logged by time t is t / dt - 1.
     last_sample = np.floor(times / dt + 1e-6).astype(int) - 1
 
     rpd = np.full((x.shape[0], n_check, 3), np.nan)
     for n in range(x.shape[0]):
-        if method == "contact":
-            td = touchdowns(x[n], threshold, dt, min_interval)
-        elif method == "phase":
-            td = phase_touchdowns(x[n])
-        else:
-            raise ValueError(f"unknown method {method!r}; use 'contact' or 'phase'")
-        rpd[n], _ = checkpoint_rpd(relative_phase_differences(td), last_sample, n_cycles)
+        td = touchdowns(x[n], threshold, dt, min_swing) if method == "contact" else phase_touchdowns(x[n])
+        rpd[n] = window_rpd(footfall_phases(td), last_sample, n_cycles)
     valid = ~np.isnan(rpd).any(axis=-1)
-    labels, distance = nearest_gait(rpd)
-    labels = np.where(valid & (distance <= max_distance), labels, TRANSITION)
+    labels, distance = classify(rpd, max_distance)
     if not batched:
         rpd, valid, labels, distance = rpd[0], valid[0], labels[0], distance[0]
     return GaitTimeseries(times, rpd, valid, labels, distance)
@@ -215,34 +212,25 @@ def rpd_timeseries(
 # --- classification ---------------------------------------------------------------------------
 
 
-def gait_distances(rpd):
-    """Wrapped distances (..., 4) from RPD vectors (..., 3) to the ideal gaits, in IDEAL_GAITS order."""
-    rpd = np.asarray(rpd, float)
-    return circular_distance(rpd[..., None, :], _IDEAL_MATRIX)
-
-
-def nearest_gait(rpd):
-    """(names, distances) of the nearest ideal gait for RPD vectors (..., 3); NaN rows give NaN."""
-    d = gait_distances(rpd)
-    nan = np.isnan(d).any(axis=-1)
-    idx = np.argmin(np.where(np.isnan(d), np.inf, d), axis=-1)
-    dist = np.where(nan, np.nan, np.take_along_axis(d, idx[..., None], axis=-1)[..., 0])
-    return _IDEAL_NAMES[idx], dist
+def classify(rpd, max_distance=TRANSITION_DISTANCE):
+    """(labels, distances) for RPD vectors (..., 3): the nearest ideal gait's name, or 'transition'
+    beyond max_distance or for a NaN (invalid) RPD, and the distance to the nearest gait (NaN if invalid)."""
+    idx, dist = oscillators.classify_rpd(torch.as_tensor(np.asarray(rpd, float)), max_distance)
+    return _LABEL_NAMES[idx.numpy()], dist.numpy()
 
 
 def classify_gait(rpd, max_distance=TRANSITION_DISTANCE):
-    """Nearest ideal gait name, or 'transition' if its wrapped distance exceeds max_distance.
-
-    Distance: per component delta = min(|a-b| mod 2pi, 2pi - |a-b| mod 2pi), then the Euclidean
-    norm over (LF, RH, LH). Accepts (3,) -> str, or (..., 3) -> array of str. NaN -> 'transition'.
-    """
-    rpd = np.asarray(rpd, float)
-    names, dist = nearest_gait(rpd)
-    labels = np.where(dist <= max_distance, names, TRANSITION)  # NaN compares False
-    return str(labels) if rpd.ndim == 1 else labels
+    """Gait name for an RPD (3,) -> str, or (..., 3) -> array of str (see `classify`)."""
+    labels, _ = classify(rpd, max_distance)
+    return str(labels) if np.ndim(rpd) == 1 else labels
 
 
 def gait_counts(labels, axis=0):
     """Count each label of GAIT_LABELS along `axis` (e.g. robots), e.g. for the gait-distribution plot."""
     labels = np.asarray(labels)
     return {g: np.sum(labels == g, axis=axis) for g in GAIT_LABELS}
+
+
+def agreement(labels_a, labels_b, axis=None):
+    """Share of entries on which two labellings (e.g. contact- and phase-based) agree."""
+    return np.mean(np.asarray(labels_a) == np.asarray(labels_b), axis=axis)

@@ -6,8 +6,8 @@ i.i.d. random initial phases, 40 s at a 1 m/s forward command:
   b) the same ORC(111) policy with sigma = 1 (as trained),
   c) an ORC(110) policy with sigma = 1 (coupling it never saw in training).
 The relative phase difference (RPD) of LF, RH, LH to RF comes from foot touchdowns (contact-based,
-analysis/gait.py: GRF > 0.1 BW, 0.1 s debounce), averaged over the last two complete RF cycles at
-every 5 s checkpoint and classified as the nearest ideal gait, or Transition beyond distance 2.
+analysis/gait.py: GRF > 0.1 BW after >= 0.05 s unloaded), each touchdown placed in its RF cycle and
+circularly averaged over the last two complete RF cycles at every 5 s checkpoint and classified as the nearest ideal gait, or Transition beyond distance 2.
 The oscillator-based RPD (phi passing pi) is computed beside it as a check.
 
 Initial RPD: the circular mean over the first two complete RF cycles (the same definition as the
@@ -95,10 +95,9 @@ def first_cycles_rpd(grf_runs, dt: float = gait.DT) -> np.ndarray:
     """Contact RPD averaged over each run's first two complete RF cycles: (N, T, 4) -> (N, 3), NaN if none."""
     out = np.full((len(grf_runs), 3), np.nan)
     for n, grf in enumerate(grf_runs):
-        cycles = gait.relative_phase_differences(gait.touchdowns(grf, dt=dt))
-        if len(cycles.end) >= gait.CYCLES_PER_CHECKPOINT:
-            rpd, _ = gait.checkpoint_rpd(cycles, [cycles.end[gait.CYCLES_PER_CHECKPOINT - 1]])
-            out[n] = rpd[0]
+        footfalls = gait.footfall_phases(gait.touchdowns(grf, dt=dt))
+        if len(footfalls.rf) > gait.CYCLES_PER_CHECKPOINT:
+            out[n] = gait.window_rpd(footfalls, footfalls.rf[gait.CYCLES_PER_CHECKPOINT])[0]
     return out
 
 
@@ -287,9 +286,9 @@ def plot_distribution(exp: Experiment, res: dict):
     bottom = np.zeros(len(times))
     width = 0.7 * (times[1] - times[0]) if len(times) > 1 else 3.5
     segments = [(g, counts[g], g, None) for g in GAITS[:-1]]
-    # Transition split into "no gait within distance 2" and "no two complete cycles" (counted as Transition).
+    # Transition split into "no gait within distance 2" and invalid windows (< 2 cycles, or a leg never landed).
     segments += [("transition", counts["transition"] - res["invalid"], "transition", None),
-                 ("transition", res["invalid"], "transition (< 2 cycles)", "////")]
+                 ("transition", res["invalid"], "invalid window", "////")]
     for color_key, count, label, hatch in segments:
         share = 100.0 * np.asarray(count) / max(n, 1)
         ax.bar(times, share, width, bottom=bottom, color=GAIT_COLORS[color_key], label=label, edgecolor="white",

@@ -78,14 +78,6 @@ def select_run(grf, dt: float = gait.DT, window_s: float = WINDOW_S) -> dict:
     }
 
 
-def stance_share(phase, grf) -> np.ndarray:
-    """Per leg, the share of the GRF integral that falls in that leg's own stance half [pi, 2pi)."""
-    phase, grf = np.asarray(phase, float), np.asarray(grf, float)
-    total = grf.sum(axis=0)
-    in_stance = (grf * (phase >= math.pi)).sum(axis=0)
-    return np.divide(in_stance, total, out=np.full(total.shape, np.nan), where=total > 0)
-
-
 def crossings(phase_leg) -> tuple[np.ndarray, np.ndarray]:
     """Sample indices (from 1 on) where a phase series wraps through 0, and where it crosses pi upward."""
     p = np.asarray(phase_leg, float)
@@ -136,7 +128,7 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
         fig = plot(phase, grf, title=f"run {i}: {choice['start_label']} at start, {choice['end_label']} at "
                                      f"{choice['end_time_s']:g} s")
     files = {"csv": csv_path, **save_figure(fig, out, FILE_STEM)}
-    share = stance_share(phase, grf)
+    share = gait.stance_share(phase, grf)
     return {
         "files": files,
         "policy": policy.name,

@@ -30,14 +30,14 @@ LEG_NAMES = ("RF", "LF", "RH", "LH")
 
 # Ideal relative phases of LF, RH, LH with respect to RF (analysis protocol §3, paper Sec. II-A).
 # A leg with RPD r lags RF by r, i.e. phi_j = phi_RF - r (protocol §3, oscillator-based RPD).
-_GAIT_RPD = {
+IDEAL_RPD = {
     "trot": (math.pi, math.pi, 0.0),
     "pace": (math.pi, 0.0, math.pi),
     "bound": (0.0, math.pi, math.pi),
     "pronk": (0.0, 0.0, 0.0),
 }
 PHASE_INIT_MODES = ("random", "trot", "pace", "bound", "pronk", "standing")
-GAIT_NAMES = tuple(_GAIT_RPD)
+GAIT_NAMES = tuple(IDEAL_RPD)
 # Farther than this (wrapped Euclidean distance in RPD space) from every ideal gait is a transition.
 TRANSITION_DISTANCE = 2.0
 
@@ -140,7 +140,7 @@ def gait_distances(rpd: torch.Tensor) -> torch.Tensor:
 
     Per component the distance is min(|a - b| mod 2*pi, 2*pi - that), so 6.2 rad is 0.08 from 0.
     """
-    ideal = torch.tensor(list(_GAIT_RPD.values()), dtype=rpd.dtype, device=rpd.device)
+    ideal = torch.tensor(list(IDEAL_RPD.values()), dtype=rpd.dtype, device=rpd.device)
     d = torch.remainder(torch.abs(rpd.unsqueeze(-2) - ideal), TWO_PI)
     return torch.linalg.vector_norm(torch.minimum(d, TWO_PI - d), dim=-1)
 
@@ -177,7 +177,7 @@ def initial_phases(
     if mode == "random":
         phase = TWO_PI * _rand((num_envs, 4), dtype, generator)
     else:
-        rel = torch.tensor((0.0,) + _GAIT_RPD[mode], dtype=dtype)
+        rel = torch.tensor((0.0,) + IDEAL_RPD[mode], dtype=dtype)
         phase = TWO_PI * _rand((num_envs, 1), dtype, generator) - rel
         phase = torch.remainder(phase, TWO_PI)
         phase = torch.where(phase >= TWO_PI, phase - TWO_PI, phase)

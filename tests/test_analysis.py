@@ -10,7 +10,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from analysis import balanced_legs, disturbance, gait_emergence, pace_to_trot, report
+from analysis import balanced_legs, disturbance, gait, gait_emergence, pace_to_trot, report
 from analysis.rollout import (
     EvalSettings,
     Job,
@@ -177,7 +177,7 @@ def test_crossings_and_stance_share():
     zero, pi = pace_to_trot.crossings(phase[:, 0])
     assert zero.size == 1 and pi.size == 2
     grf = (phase >= PI) * 0.4  # force only in stance
-    assert pace_to_trot.stance_share(phase, grf)[0] == pytest.approx(1.0)
+    assert gait.stance_share(phase, grf)[0] == pytest.approx(1.0)
 
 
 # --- rollout helper -------------------------------------------------------------------------------

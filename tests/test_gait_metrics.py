@@ -9,17 +9,18 @@ from analysis.gait import (
     GAIT_LABELS,
     IDEAL_GAITS,
     TRANSITION,
-    checkpoint_rpd,
+    agreement,
     circular_difference,
     circular_mean,
+    classify,
     classify_gait,
+    footfall_phases,
     gait_counts,
-    nearest_gait,
     oscillator_rpd,
     phase_touchdowns,
-    relative_phase_differences,
     rpd_timeseries,
     touchdowns,
+    window_rpd,
 )
 
 PI = math.pi
@@ -40,6 +41,33 @@ def grf_from_touchdowns(td_lists, n_steps, stance=20, load=0.5):
     for leg, tds in enumerate(td_lists):
         for t in tds:
             grf[t : t + stance, leg] = load
+    return grf
+
+
+def footfalls(rpd, freq=2.5, duty=0.5, n_steps=T, dt=0.01, jitter=0, start=0.13, seed=0):
+    """Ideal touchdown samples per leg: RF lands at start + k / freq, leg j lags it by rpd_j / (2 pi)
+    of a cycle; each touchdown is moved by up to +-jitter samples. Returns (touchdowns, stance samples)."""
+    rng = np.random.default_rng(seed)
+    period = 1.0 / freq
+    lags = np.concatenate([[0.0], np.asarray(rpd, float) / (2 * PI)]) * period
+    out = []
+    for lag in lags:
+        t = start + lag + period * np.arange(-1, n_steps * dt / period + 1)
+        k = np.round(t / dt).astype(int) + rng.integers(-jitter, jitter + 1, t.size)
+        out.append(k[(k >= 0) & (k < n_steps)])
+    return out, int(round(duty * period / dt))
+
+
+def gait_grf(rpd, n_steps=T, bounce=False, load=0.5, **kw):
+    """GRF (T, 4) of a gait from footfalls(); bounce=True adds a lift-off bounce to every stance: the
+    force dips to the threshold for one sample and comes back for two before the foot leaves."""
+    tds, stance = footfalls(rpd, n_steps=n_steps, **kw)
+    grf = grf_from_touchdowns(tds, n_steps, stance, load)
+    if bounce:
+        for leg, ks in enumerate(tds):
+            for k in ks:
+                grf[k + stance - 3 : k + stance - 2, leg] = 0.1
+                grf[k + stance : k + stance + 2, leg] = load
     return grf
 
 
@@ -97,9 +125,10 @@ def test_classify_batched():
     labels = classify_gait(rpd)
     assert labels.shape == (5,)
     assert labels.tolist() == ["trot", "pace", "bound", "pronk", TRANSITION]
-    names, dist = nearest_gait(rpd.reshape(5, 1, 3))
+    names, dist = classify(rpd.reshape(5, 1, 3))
     assert names.shape == dist.shape == (5, 1)
     assert dist[4, 0] == pytest.approx(PI)
+    assert np.isnan(classify([np.nan, 0.0, 0.0])[1])
 
 
 def test_uniform_rpd_transition_fraction():
@@ -109,59 +138,105 @@ def test_uniform_rpd_transition_fraction():
     assert np.mean(labels != TRANSITION) == pytest.approx(0.540, abs=0.005)
 
 
-# --- touchdowns and cycles --------------------------------------------------------------------
+# --- touchdowns and footfall phases -------------------------------------------------------------
 
 
-def test_touchdowns_and_chatter():
+def test_touchdowns_need_a_swing_before_them():
     grf = np.zeros((100, 4))
     grf[10:30, 0] = 0.4
-    grf[32:34, 0] = 0.4  # chatter 0.22 s after touchdown: kept (>= 0.1 s)
+    grf[36:40, 0] = 0.4  # after 0.06 s unloaded: a touchdown
     grf[50:52, 1] = 0.4
-    grf[54:70, 1] = 0.4  # re-contact 0.04 s later: rejected
-    grf[0:20, 2] = 0.4  # contact at t=0 is not a touchdown
+    grf[54:70, 1] = 0.4  # after 0.02 s unloaded (a lift-off bounce): none
+    grf[0:20, 2] = 0.4  # contact at t = 0 is not a touchdown
     grf[40:60, 3] = 0.1  # exactly at threshold: not contact
     td = touchdowns(grf)
-    assert td[0].tolist() == [10, 32]
+    assert td[0].tolist() == [10, 36]
     assert td[1].tolist() == [50]
     assert td[2].tolist() == []
     assert td[3].tolist() == []
-    assert touchdowns(grf, min_interval=0.0)[1].tolist() == [50, 54]
+    assert touchdowns(grf, min_swing=0.0)[1].tolist() == [50, 54]
+    assert touchdowns(grf, min_swing=0.1)[0].tolist() == [10]
 
 
-@pytest.mark.parametrize("gait", ["trot", "pace", "bound", "pronk"])
-def test_ideal_square_waves(gait):
-    grf = square_wave(IDEAL_GAITS[gait])
-    cycles = relative_phase_differences(touchdowns(grf))
-    assert len(cycles.start) == T // PERIOD - 2  # RF touchdowns at 40, 80, ..., 3960
-    assert np.allclose(cycles.end - cycles.start, PERIOD)
-    assert np.allclose(circular_difference(cycles.rpd, IDEAL_GAITS[gait]), 0.0)
+GAIT_CASES = [(g, f, d) for g in ("trot", "pace", "bound", "pronk") for f, d in ((1.5, 0.6), (2.5, 0.5), (3.5, 0.35))]
+
+
+@pytest.mark.parametrize("gait,freq,duty", GAIT_CASES)
+def test_ideal_gaits_at_several_frequencies_and_duty_factors(gait, freq, duty):
+    grf = gait_grf(IDEAL_GAITS[gait], freq=freq, duty=duty)
+    td = touchdowns(grf)
+    expected = footfalls(IDEAL_GAITS[gait], freq=freq)[0]
+    for leg in range(4):
+        assert np.array_equal(td[leg], expected[leg][expected[leg] > 0])
     ts = rpd_timeseries(grf)
     assert ts.times.tolist() == [5.0 * k for k in range(1, 9)]
     assert ts.valid.all()
     assert (ts.labels == gait).all()
-    assert np.allclose(ts.distance, 0.0, atol=1e-9)
+    assert np.all(ts.distance < 2 * PI * 0.01 * freq * math.sqrt(3))  # within one-sample quantisation
+
+
+@pytest.mark.parametrize("gait", ["trot", "pace", "bound", "pronk"])
+def test_lift_off_bounce_is_no_touchdown(gait):
+    clean, bouncy = gait_grf(IDEAL_GAITS[gait]), gait_grf(IDEAL_GAITS[gait], bounce=True)
+    assert not np.array_equal(clean, bouncy)
+    for a, b in zip(touchdowns(clean), touchdowns(bouncy)):
+        assert np.array_equal(a, b)  # 100 per leg in 40 s, not 200
+    assert (rpd_timeseries(bouncy).labels == gait).all()
+    # The old rule (a 0.1 s minimum interval instead of a swing) takes each bounce for a touchdown.
+    assert len(touchdowns(bouncy, min_swing=0.0)[0]) == 2 * len(touchdowns(clean)[0])
+
+
+@pytest.mark.parametrize("gait", ["trot", "pace", "bound", "pronk"])
+def test_legs_landing_alternately_before_and_after_rf(gait):
+    # Every leg with RPD 0 lands one sample before RF in even cycles and on RF's sample in odd ones
+    # (so some RF cycles hold two of its touchdowns and some none); legs with RPD pi stay on time.
+    tds, stance = footfalls(IDEAL_GAITS[gait])
+    rf = tds[0]
+    for j, r in enumerate(IDEAL_GAITS[gait]):
+        if r == 0.0:
+            tds[j + 1] = rf - (np.arange(rf.size) % 2 == 0)
+    grf = grf_from_touchdowns(tds, T, stance)
+    ts = rpd_timeseries(grf)
+    assert ts.valid.all()
+    assert (ts.labels == gait).all()
+
+
+@pytest.mark.parametrize("gait", ["trot", "pace", "bound", "pronk"])
+def test_touchdown_jitter_of_two_samples(gait):
+    for seed in range(3):
+        ts = rpd_timeseries(gait_grf(IDEAL_GAITS[gait], jitter=2, seed=seed))
+        assert ts.valid.all()
+        assert (ts.labels == gait).all()
+
+
+@pytest.mark.parametrize("gait", ["trot", "pace", "bound", "pronk"])
+def test_time_shift_leaves_labels_unchanged(gait):
+    reference = rpd_timeseries(gait_grf(IDEAL_GAITS[gait])).labels
+    for start in (0.0, 0.07, 0.19, 0.33):
+        assert np.array_equal(rpd_timeseries(gait_grf(IDEAL_GAITS[gait], start=start)).labels, reference)
 
 
 def test_generic_rpd_value():
     rpd = (PI / 2, 3 * PI / 2, PI / 4)  # lags of 10, 30, 5 steps
-    cycles = relative_phase_differences(touchdowns(square_wave(rpd)))
-    assert np.allclose(cycles.rpd, rpd)
+    ts = rpd_timeseries(square_wave(rpd))
+    assert np.allclose(ts.rpd, rpd)
 
 
 def test_pronk_with_jitter_across_seam():
     # Followers touch down every 40 steps; RF one step before them, then one slower RF cycle (42 steps)
-    # lets the followers fall from "just after RF" (RPD 2pi/42) to "just before the next RF"
-    # (RPD 2pi*39/40). The last two cycles straddle the 0/2pi seam.
+    # lets the followers fall from "just after RF" (phase 2pi/42) to "just before the next RF"
+    # (2pi*39/40). The last two cycles straddle the 0/2pi seam.
     followers = list(range(40, 500, 40))
     rf = list(range(39, 400, 40)) + [441, 481]
     grf = grf_from_touchdowns([rf, followers, followers, followers], 500)
-    cycles = relative_phase_differences(touchdowns(grf))
-    assert np.allclose(cycles.rpd[-2], 2 * PI / 42) and np.allclose(cycles.rpd[-1], 2 * PI * 39 / 40)
+    ff = footfall_phases(touchdowns(grf))
+    window = ff.phase[0][ff.cycle[0] >= len(rf) - 3]  # LF's touchdowns in the last two cycles
+    assert np.allclose(np.sort(window), [2 * PI / 42, 2 * PI * 39 / 40, 2 * PI * 41 / 42])
     ts = rpd_timeseries(grf)  # one checkpoint at 5 s: the last two cycles
     assert ts.labels.tolist() == ["pronk"]
-    assert np.all(circular_difference(ts.rpd, 0.0) < 0.01)
-    # An arithmetic mean of the same two cycles would sit near (pi, pi, pi), a Transition corner.
-    assert classify_gait(cycles.rpd[-2:].mean(axis=0)) == TRANSITION
+    assert np.all(circular_difference(ts.rpd, 0.0) < 0.1)
+    # An arithmetic mean of the same phases would sit near (pi, pi, pi), a Transition corner.
+    assert classify_gait(np.full(3, np.mean(window))) == TRANSITION
 
 
 def test_drifting_pattern_passes_through_transition():
@@ -180,7 +255,7 @@ def test_drifting_pattern_passes_through_transition():
     assert np.all(np.diff(np.unwrap(lh)) < 0)  # LH keeps gaining on RF
 
 
-def test_missing_leg_makes_checkpoint_invalid():
+def test_missing_or_dragging_leg_makes_window_invalid():
     grf = square_wave(IDEAL_GAITS["trot"])
     grf[:, 3] = 0.0  # three-legged: LH never touches down
     ts = rpd_timeseries(grf)
@@ -190,19 +265,22 @@ def test_missing_leg_makes_checkpoint_invalid():
     ts = rpd_timeseries(grf)
     assert ts.valid.tolist() == [False] * 4 + [True] * 4
     assert ts.labels.tolist() == [TRANSITION] * 4 + ["trot"] * 4
+    grf[:, 1] = 0.3 + 0.1 * (np.arange(T) % 40 < 20)  # LF drags: always loaded, never lands
+    ts = rpd_timeseries(grf)
+    assert not ts.valid.any() and (ts.labels == TRANSITION).all()
 
 
-def test_checkpoint_uses_last_two_complete_cycles():
+def test_window_uses_last_two_complete_cycles():
     # RF touchdowns every 40 steps from 40; LF lags by 20 until step 2000, then by 10.
     rf = np.arange(40, 4000, 40)
     lf = np.where(rf < 2000, rf + 20, rf + 10)
-    cycles = relative_phase_differences([rf, lf, rf, rf])
-    rpd, valid = checkpoint_rpd(cycles, [1999, 2039, 2040, 2080, 30])
-    assert valid.tolist() == [True, True, True, True, False]
+    rpd = window_rpd(footfall_phases([rf, lf, rf, rf]), [1999, 2039, 2040, 2080, 30])
+    assert np.isnan(rpd[4]).all() and not np.isnan(rpd[:4]).any()
     assert rpd[0, 0] == pytest.approx(PI)  # cycles [1880, 1920) and [1920, 1960)
     assert rpd[1, 0] == pytest.approx(PI)  # [2000, 2040) is not complete at sample 2039
     assert circular_difference(rpd[2, 0], 0.75 * PI) < 1e-9  # one cycle of each
     assert rpd[3, 0] == pytest.approx(PI / 2)
+    assert np.allclose(rpd[:4, 1:], 0.0)  # RH, LH land with RF: phase 0 of the cycle they open
 
 
 def test_slow_gait_without_two_cycles_is_invalid():
@@ -223,9 +301,11 @@ def test_phase_and_contact_methods_agree():
     assert np.allclose(circular_difference(oscillator_rpd(phase), rpd), 0.0, atol=1e-9)
     td_phase, td_contact = phase_touchdowns(phase), touchdowns(grf)
     for a, b in zip(td_phase, td_contact):
-        assert np.array_equal(a, b)
+        # A touchdown within the first 0.05 s has no full swing on record: contacts skip it.
+        assert np.array_equal(a[a >= 5], b)
     ts_c, ts_p = rpd_timeseries(grf), rpd_timeseries(phase, method="phase")
     assert np.allclose(ts_c.rpd, ts_p.rpd)
+    assert agreement(ts_c.labels, ts_p.labels) == 1.0
     assert np.all(circular_difference(ts_c.rpd, rpd) < 2 * PI / 40 + 1e-9)  # one-step quantisation
 
 

@@ -1,0 +1,244 @@
+"""Oscillator obedience: does a policy walk the gait its oscillators dictate?
+
+The paper says ORC(11x) policies evaluated with coupling sigma = 0 "match their RPD to the oscillator
+phases". Made measurable here, per policy:
+  a) obedience: sigma = 0, the four oscillators started in an ideal gait (trot, pace, bound, pronk;
+     random common phase), 1 m/s from the first step. With sigma = 0 the oscillators keep that
+     pattern, so a policy that uses them walks it. Per started gait: the share of robots whose
+     contact-based gait at 10 s is the started one, the oscillator-based label beside it (their
+     agreement), the forward velocity over the last 5 s, and the share of each foot's GRF impulse
+     that falls in its own stance half [pi, 2pi).
+  b) coupled settling: sigma = 1 (also for policies trained without coupling), random phases, 1 m/s;
+     the gait mix every second, the share in a regular gait at 10 s, and per robot the time
+     from which it stays in one regular gait to the end (median over robots).
+Policies without phase observations cannot see their oscillators: under the deterministic
+evaluation all their robots move identically, which is reported as such ("identical robots")
+rather than as a distribution.
+
+Usage: python -m analysis.obedience [--runs DIR] --out DIR [--quick]
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from analysis import gait
+from analysis.plotting import COLUMN_WIDTH, GAIT_COLORS, paper_style, save_figure, sort_configs
+from analysis.rollout import EvalSettings, Job, PolicyRun, cli_main, run_jobs
+
+import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
+
+STARTED_GAITS = ("trot", "pace", "bound", "pronk")
+PROTOCOL = {"robots": 64, "duration_s": 10.0, "settle_robots": 64, "settle_duration_s": 40.0}
+QUICK = {"robots": 16, "duration_s": 10.0, "settle_robots": 16, "settle_duration_s": 20.0}
+COMMAND = 1.0  # [m/s]
+VELOCITY_WINDOW_S = 5.0  # the forward velocity is averaged over the last this many seconds
+SETTLE_INTERVAL_S = 1.0  # checkpoints of the coupled-settling gait mix (windows of two cycles each)
+FILE_STEM = "obedience"
+
+
+@dataclass
+class StartedGait:
+    """One policy walking with its oscillators started in one ideal gait, sigma = 0."""
+
+    gait: str
+    robots: int
+    obeyed: float  # share of robots whose contact gait at the end is `gait`
+    contact_mix: dict[str, float]  # share of robots per contact label at the end
+    phase_agreement: float  # share of robots whose contact and oscillator labels agree at the end
+    velocity: float  # mean forward velocity over the last VELOCITY_WINDOW_S [m/s]
+    stance_share: float  # GRF impulse in the own stance half, mean over feet and robots
+    falls: int
+    identical: bool  # every robot did exactly the same (a policy blind to its phases)
+
+
+@dataclass
+class CoupledSettling:
+    """One policy at sigma = 1 from random phases."""
+
+    robots: int
+    times: list[float]  # checkpoint times [s]
+    mix: list[dict[str, float]]  # contact-label shares per checkpoint
+    regular_at_10s: float  # share of robots in a regular gait at the 10 s checkpoint
+    median_settle_s: float  # median over robots of the settling time (inf: more than half never settle)
+    velocity_error: float  # mean |v_x - command| over the last VELOCITY_WINDOW_S [m/s]
+    falls: int
+    identical: bool
+
+
+@dataclass
+class Obedience:
+    policy: str
+    orc: str
+    started: dict[str, StartedGait]
+    settling: CoupledSettling | None = None
+
+    @property
+    def min_obeyed(self) -> float:
+        return min(s.obeyed for s in self.started.values())
+
+    def summary(self) -> str:
+        parts = [f"{g} {100 * s.obeyed:.0f}% ({s.velocity:.2f} m/s)" for g, s in self.started.items()]
+        text = "obedience " + " / ".join(parts)
+        if self.settling is not None:
+            st = self.settling
+            text += (f" | sigma=1: regular at 10 s {100 * st.regular_at_10s:.0f}%, final "
+                     f"{_mix_text(st.mix[-1])}, median settle {st.median_settle_s:g} s, falls {st.falls}")
+        return text
+
+
+def _mix_text(mix: dict[str, float]) -> str:
+    items = sorted(((p, g) for g, p in mix.items() if p > 0), reverse=True)
+    return ", ".join(f"{g} {100 * p:.0f}%" for p, g in items) or "-"
+
+
+def _identical(rollout) -> bool:
+    grf = rollout.data["grf"]
+    return bool(len(grf) > 1 and np.ptp(grf, axis=0).max() < 1e-6)
+
+
+def _forward_velocity(rollout) -> np.ndarray:
+    """(N,) mean forward velocity of each robot over the last VELOCITY_WINDOW_S."""
+    window = int(round(VELOCITY_WINDOW_S / rollout.dt))
+    return rollout.data["base_lin_vel"][:, -window:, 0].mean(axis=1)
+
+
+def started_gait_result(rollout, started: str) -> StartedGait:
+    grf, phase = rollout.data["grf"], rollout.data["phase"]
+    contact = gait.rpd_timeseries(grf, dt=rollout.dt)
+    by_phase = gait.rpd_timeseries(phase, dt=rollout.dt, method="phase")
+    final = contact.labels[:, -1]
+    return StartedGait(
+        gait=started,
+        robots=len(grf),
+        obeyed=float(np.mean(final == started)),
+        contact_mix={g: float(np.mean(final == g)) for g in gait.GAIT_LABELS},
+        phase_agreement=float(gait.agreement(final, by_phase.labels[:, -1])),
+        velocity=float(_forward_velocity(rollout).mean()),
+        stance_share=float(np.nanmean(gait.stance_share(phase, grf))),
+        falls=int(rollout.fell().sum()),
+        identical=_identical(rollout),
+    )
+
+
+def settle_times(times, labels) -> np.ndarray:
+    """Per robot, the first checkpoint from which its label stays one regular gait to the end (inf: never)."""
+    labels = np.asarray(labels)
+    times = np.asarray(times, float)
+    out = np.full(len(labels), np.inf)
+    for n, row in enumerate(labels):
+        if row[-1] == gait.TRANSITION:
+            continue
+        differs = np.flatnonzero(row != row[-1])
+        out[n] = times[differs[-1] + 1] if differs.size else times[0]
+    return out
+
+
+def coupled_settling_result(rollout) -> CoupledSettling:
+    contact = gait.rpd_timeseries(rollout.data["grf"], dt=rollout.dt, interval=SETTLE_INTERVAL_S)
+    labels = contact.labels
+    at_10 = np.flatnonzero(np.isclose(contact.times, 10.0))
+    regular = labels != gait.TRANSITION
+    return CoupledSettling(
+        robots=len(labels),
+        times=[float(t) for t in contact.times],
+        mix=[{g: float(np.mean(labels[:, c] == g)) for g in gait.GAIT_LABELS} for c in range(labels.shape[1])],
+        regular_at_10s=float(regular[:, at_10[0]].mean()) if at_10.size else float("nan"),
+        median_settle_s=float(np.median(settle_times(contact.times, labels))),
+        velocity_error=float(np.mean(np.abs(_forward_velocity(rollout) - COMMAND))),
+        falls=int(rollout.fell().sum()),
+        identical=_identical(rollout),
+    )
+
+
+def measure(policies: list[PolicyRun], robots: int = QUICK["robots"], duration_s: float = QUICK["duration_s"],
+            settle_robots: int = QUICK["settle_robots"], settle_duration_s: float = QUICK["settle_duration_s"],
+            settings: EvalSettings = EvalSettings(), seed: int = 0, num_threads: int = 0,
+            progress: bool = True) -> list[Obedience]:
+    """Obedience (and, when settle_robots > 0, coupled settling) of each policy; all policies share batches."""
+    dt = 1.0 / policies[0].env_cfg.control.frequency_hz
+    record = ("grf", "phase", "base_lin_vel", "terminated")
+    jobs = [Job(p, robots) for p in policies]
+    started: list[dict[str, StartedGait]] = [{} for _ in policies]
+    for g in STARTED_GAITS:
+        gait_settings = dataclasses.replace(settings, phase_init=g, coupling=0.0)
+        rollouts = run_jobs(jobs, int(round(duration_s / dt)), gait_settings, command=(COMMAND, 0.0, 0.0),
+                            record=record, seed=seed, num_threads=num_threads, progress=progress,
+                            label=f"obedience, {g}")
+        for i, r in enumerate(rollouts):
+            started[i][g] = started_gait_result(r, g)
+    settling: list[CoupledSettling | None] = [None] * len(policies)
+    if settle_robots > 0:
+        coupled = dataclasses.replace(settings, phase_init="random", coupling=1.0)
+        rollouts = run_jobs([Job(p, settle_robots) for p in policies], int(round(settle_duration_s / dt)), coupled,
+                            command=(COMMAND, 0.0, 0.0), record=record, seed=seed, num_threads=num_threads,
+                            progress=progress, label="obedience, sigma = 1")
+        settling = [coupled_settling_result(r) for r in rollouts]
+    return [Obedience(p.name, p.orc, s, c) for p, s, c in zip(policies, started, settling)]
+
+
+def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
+        progress: bool = True) -> dict:
+    """Measure every policy, write obedience.csv, obedience_settling.csv and the figure; return the summary."""
+    sizes = QUICK if quick else PROTOCOL
+    results = measure(list(policies), settings=settings, seed=seed, progress=progress, **sizes)
+    results.sort(key=lambda r: (sort_configs([r.orc]), r.policy))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {"csv": out / f"{FILE_STEM}.csv", "settling_csv": out / f"{FILE_STEM}_settling.csv"}
+    with open(files["csv"], "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["policy", "orc", "started_gait", "robots", "obeyed", "phase_agreement", "velocity_mps",
+                    "stance_share", "falls", "identical_robots", *(f"contact_{g}" for g in gait.GAIT_LABELS)])
+        for r in results:
+            for s in r.started.values():
+                w.writerow([r.policy, r.orc, s.gait, s.robots, f"{s.obeyed:.4f}", f"{s.phase_agreement:.4f}",
+                            f"{s.velocity:.4f}", f"{s.stance_share:.4f}", s.falls, int(s.identical),
+                            *(f"{s.contact_mix[g]:.4f}" for g in gait.GAIT_LABELS)])
+    with open(files["settling_csv"], "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["policy", "orc", "time_s", "robots", *gait.GAIT_LABELS])
+        for r in results:
+            if r.settling is not None:
+                for t, mix in zip(r.settling.times, r.settling.mix):
+                    w.writerow([r.policy, r.orc, f"{t:g}", r.settling.robots, *(f"{mix[g]:.4f}" for g in gait.GAIT_LABELS)])
+    with paper_style():
+        files.update(save_figure(plot(results), out, FILE_STEM))
+    return {"files": files, "results": results, "sizes": dict(sizes), "settings": settings.describe()}
+
+
+def plot(results: list[Obedience]):
+    """Top: share of robots walking the started gait; bottom: GRF impulse share in the stance half."""
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(COLUMN_WIDTH, 3.6), sharex=True, layout="constrained")
+    x = np.arange(len(results))
+    width = 0.8 / len(STARTED_GAITS)
+    for k, g in enumerate(STARTED_GAITS):
+        pos = x - 0.4 + (k + 0.5) * width
+        top.bar(pos, [100 * r.started[g].obeyed for r in results], width, color=GAIT_COLORS[g], label=g)
+        bottom.bar(pos, [100 * r.started[g].stance_share for r in results], width, color=GAIT_COLORS[g])
+    for i, r in enumerate(results):
+        if all(s.identical for s in r.started.values()):
+            top.text(i, 102, "identical\nrobots", ha="center", va="bottom", fontsize=5)
+    top.set_ylabel("walks the started\ngait at 10 s [%]")
+    top.set_ylim(0, 118)
+    top.set_title(r"Oscillators started in a gait, $\sigma$ = 0, 1 m/s (contact-based gaits)")
+    top.legend(ncols=4, frameon=False, loc="upper left", fontsize=6)
+    bottom.axhline(50, color="0.5", lw=0.6, ls="--")
+    bottom.set_ylabel("GRF impulse in\nstance half [%]")
+    bottom.set_ylim(0, 100)
+    bottom.set_xticks(x)
+    bottom.set_xticklabels([f"ORC {r.orc}" for r in results], rotation=0)
+    return fig
+
+
+def main(argv=None):
+    cli_main(__doc__.splitlines()[0], run, argv)
+
+
+if __name__ == "__main__":
+    main()
