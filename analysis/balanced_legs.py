@@ -80,9 +80,12 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     rollouts = run_jobs(jobs, steps, settings, command=(command, 0.0, 0.0), record=("grf", "terminated"),
                         seed=seed, progress=progress, label="balanced legs")
 
-    rows = []
+    rows, identical = [], {}
     for policy, r in zip(policies, rollouts):
         g = mean_grf_per_leg(r.data["grf"])
+        # A policy that does not observe its phases moves every robot alike under deterministic evaluation.
+        same = bool(r.num_envs > 1 and np.ptp(g, axis=0).max() < 1e-6)
+        identical[policy.orc] = identical.get(policy.orc, True) and same
         fell = r.fell()
         for i in range(r.num_envs):
             rows.append({"config": policy.orc, "run": policy.name, "robot": i, "fell": bool(fell[i]),
@@ -117,7 +120,8 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
         "files": {"csv": per_robot_csv, "summary_csv": summary_csv, **figs},
         "sizes": {"robots_per_policy": robots, "duration_s": duration, "command_mps": command},
         "settings": settings.describe(),
-        "configs": {c: {**stats[c], "falls": falls[c], "policies": n_policies[c]} for c in configs},
+        "configs": {c: {**stats[c], "falls": falls[c], "policies": n_policies[c], "identical_robots": identical[c]}
+                    for c in configs},
     }
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis import balanced_legs, disturbance, fixed_points, gait_emergence, pace_to_trot
+from analysis import balanced_legs, disturbance, fixed_points, gait_emergence, obedience, pace_to_trot
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
 from analysis.plotting import LEG_NAMES, sort_configs
 from analysis.rollout import (
@@ -160,10 +160,11 @@ def build(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalS
     else:
         pt = {"files": {}, "skipped": "no ORC(111) policy among the runs"}
     del collected
+    ob = obedience.run(policies, out, quick, settings, seed, progress=progress)
     db = disturbance.run(policies, out, quick, settings, seed, progress=progress)
 
     results = {"fixed_points": fp, "balanced_legs": bl, "gait_emergence": ge, "pace_to_trot": pt,
-               "disturbance": db}
+               "obedience": ob, "disturbance": db}
     text = render(policies, results, quick, settings, seed, source, started)
     report_path = out / "report.md"
     report_path.write_text(text)
@@ -175,8 +176,8 @@ def render(policies, results: dict, quick: bool, settings: EvalSettings, seed: i
            started: datetime.datetime) -> str:
     groups = group_by_orc(policies)
     configs = sort_configs(groups)
-    bl, ge, pt, db, fp = (results[k] for k in ("balanced_legs", "gait_emergence", "pace_to_trot", "disturbance",
-                                               "fixed_points"))
+    bl, ge, pt, ob, db, fp = (results[k] for k in ("balanced_legs", "gait_emergence", "pace_to_trot", "obedience",
+                                                   "disturbance", "fixed_points"))
     minutes = (datetime.datetime.now() - started).total_seconds() / 60
     md = ["# orcgym analysis report", ""]
     if quick:
@@ -190,14 +191,19 @@ def render(policies, results: dict, quick: bool, settings: EvalSettings, seed: i
         "- Evaluation overrides applied to each run's env.yaml (protocol §1.6): `"
         + " ".join(eval_overrides(settings, MiniCheetahOscCfg())) + "`",
         "- Falls: a robot's `terminated` flag (trunk contact > 1 N); it is then reset standing with a zero command.",
-        "- Touchdowns (gait sections): contact-based, GRF > 0.1 body weight, 0.1 s debounce; RPD averaged "
-        "(circular mean) over the last two complete RF cycles at each 5 s checkpoint; Transition beyond a "
-        "wrapped distance of 2 (analysis/gait.py).",
+        "- Gaits: every gait label in this report is **contact-based** unless a column says otherwise: a "
+        "touchdown is GRF rising above 0.1 body weight after ≥ 0.05 s unloaded; each touchdown gets its phase "
+        "in the RF cycle that holds it; the RPD of a window (the last two complete RF cycles before a "
+        "checkpoint) is the circular mean of those phases; nearest ideal gait, Transition beyond a wrapped "
+        "distance of 2; a window in which a leg never landed is invalid and counted as Transition "
+        "(analysis/gait.py). Oscillator-based labels (phases crossing π) are shown beside them with the "
+        "agreement rate.",
         "",
     ]
     md += _section_balanced(bl)
     md += _section_emergence(ge)
     md += _section_pace(pt)
+    md += _section_obedience(ob)
     md += _section_disturbance(db)
     md += _section_fixed_points(fp)
     md += ["## Files", ""]
@@ -218,7 +224,8 @@ def _section_balanced(bl: dict) -> list[str]:
           "Figure: `balanced_legs.png`.", ""]
     rows = []
     for c, st in bl["configs"].items():
-        rows.append([c, st["policies"], st["n"], st["falls"],
+        robots = f"{st['n']} (all alike)" if st.get("identical_robots") else st["n"]
+        rows.append([c, st["policies"], robots, st["falls"],
                      " / ".join(f"{v:.2f}" for v in st["median"]),
                      " / ".join(f"{v:.2f}" for v in st["iqr"]),
                      f"{100 * st['frac_leg_near_zero']:.0f} %", _fmt(st["mean_max_deviation"])])
@@ -226,7 +233,9 @@ def _section_balanced(bl: dict) -> list[str]:
                            "IQR " + "/".join(LEG_NAMES), "robots with a leg < 0.05", "mean max |ḡ − 0.25|"], rows), ""]
     md += ["Paper (qualitative): ORC(11x) roughly centred on 0.25 for every leg, ORC(110) slightly wider than "
            "ORC(111); every other configuration wide, with clusters near 0 for at least one leg (2- or 3-legged "
-           "gaits)."]
+           "gaits).",
+           "\"All alike\": the configuration's policies do not observe their oscillators, so under the deterministic "
+           "evaluation every robot moves identically; its robots are one sample repeated, not a distribution.", ""]
     inner = [c for c in bl["configs"] if c in ("110", "111")]
     outer = [c for c in bl["configs"] if c not in ("110", "111")]
     if inner and outer:
@@ -275,9 +284,38 @@ def _section_pace(pt: dict) -> list[str]:
     return md
 
 
+def _section_obedience(ob: dict) -> list[str]:
+    s = ob["sizes"]
+    md = ["## 4. Oscillator obedience (paper: ORC(11x) with σ = 0 \"match their RPD to the oscillator phases\")", "",
+          f"Per policy: σ = 0, oscillators started in each ideal gait, {s['robots']} robots per gait, "
+          f"{s['duration_s']:g} s at 1 m/s; the share of robots whose contact-based gait at {s['duration_s']:g} s "
+          "is the started one (forward velocity over the last 5 s in brackets), the share of GRF impulse inside each "
+          "foot's own stance half [π, 2π) (50 % = ignores its oscillator), and how often the contact and oscillator "
+          f"labels agree. σ = 1: random phases, {s['settle_robots']} robots, {s['settle_duration_s']:g} s; share in a "
+          "regular gait at 10 s, final mix, median time from which a robot stays in one regular gait. Figure: "
+          "`obedience.png`.", ""]
+    rows = []
+    for r in ob["results"]:
+        started = r.started.values()
+        if all(x.identical for x in started):
+            obeyed = "all robots alike: " + " / ".join(f"{x.gait} {'yes' if x.obeyed else 'no'}" for x in started)
+        else:
+            obeyed = " / ".join(f"{100 * x.obeyed:.0f} % ({x.velocity:.2f})" for x in started)
+        st = r.settling
+        rows.append([r.orc, r.policy, obeyed,
+                     " / ".join(f"{100 * x.stance_share:.0f} %" for x in started),
+                     f"{100 * np.mean([x.phase_agreement for x in started]):.0f} %",
+                     f"{100 * st.regular_at_10s:.0f} %", _shares(st.mix[-1]), _fmt(st.median_settle_s, 0, " s"),
+                     sum(x.falls for x in started) + st.falls])
+    md += [markdown_table(["ORC", "policy", "walks started trot / pace / bound / pronk (v [m/s])",
+                           "GRF in stance half", "contact/oscillator agreement", "σ = 1: regular at 10 s",
+                           "σ = 1: final gaits", "σ = 1: median settle", "falls"], rows), ""]
+    return md
+
+
 def _section_disturbance(db: dict) -> list[str]:
     s = db["sizes"]
-    md = ["## 4. Disturbance rejection (Table I, protocol §6)", "",
+    md = ["## 5. Disturbance rejection (Table I, protocol §6)", "",
           f"Per policy and impulse: {s['robots_per_policy_and_impulse']} robots ({s['slots']} slots × "
           f"{s['directions']} directions, {s['direction_mode']} spacing), {s['command_mps']:g} m/s command, "
           f"{s['settle_s']:g} s settling, {s['test_s']:g} s test window; failure = termination from the command "
@@ -299,7 +337,7 @@ def _section_fixed_points(fp: dict) -> list[str]:
     for name, points in fp["fixed_points"].items():
         found = ", ".join(f"{p:.3f} ({s})" for p, s in points) or "none"
         rows.append([name, found, EXPECTED_FIXED_POINTS.get(name, "–")])
-    return ["## 5. Oscillator fixed points (fig. offset, protocol §7)", "",
+    return ["## 6. Oscillator fixed points (fig. offset, protocol §7)", "",
             "Analytic, GRF = 0.25, ω = 1 Hz unless noted. Figure: `oscillator_fixed_points.png`.", "",
             markdown_table(["curve", "fixed points [rad] here", "expected (protocol §7)"], rows), ""]
 

@@ -138,7 +138,7 @@ PROFILES: dict[str, Profile] = {
         "the released ORCAgym setup (4096 envs x 32 steps, 2000 iterations, lr 1e-5 adaptive); "
         "these are the task defaults, so the profile changes nothing"
     ),
-    # Tuned for wall-clock on 2 CPU cores (bench/time_to_trot.py): a quarter of the robots, shorter
+    # Tuned for wall-clock on 2 CPU cores (bench/time_to_obedience.py): a quarter of the robots, shorter
     # rollouts, a smaller network (the PPO update is a third of each iteration on a CPU), a larger
     # starting learning rate under the same adaptive-KL schedule, GAE lambda 0.95, less entropy, and
     # commands concentrated on forward walking (v_x from {0, 1, 2} m/s + N(0, 0.3^2)).

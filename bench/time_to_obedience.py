@@ -1,0 +1,111 @@
+"""Wall-clock minutes until mini_cheetah_osc ORC-111 walks, and until it obeys its oscillators.
+
+Trains ORC-111 with `--profile` (default cpu_fast) and, every `--eval_every` iterations, pauses the
+clock and evaluates the current deterministic policy in the analysis evaluation setting (no noise,
+pushes or randomisation), at a 1 m/s command:
+  - walking (analysis.locomotion, 16 robots, random phases, 12 s of which the last 10 s count):
+    tracking error below 0.15 m/s (per robot |mean forward velocity - 1|, averaged) and no falls;
+  - obedience (analysis.obedience, 16 robots per gait): with coupling sigma = 0 and the oscillators
+    started in trot, pace, bound and pronk, at least 80 % of robots walk that gait at 10 s (contact-based
+    gaits, analysis.gait) at 1.0 +- 0.15 m/s, no falls; and with sigma = 1 from random phases at
+    least 80 % are in a regular gait at 10 s.
+A pronk reached from random phases counts for walking, never for obedience. The clock counts
+training only (env stepping and PPO updates), not the evaluations. The run stops once it obeys.
+
+    python bench/time_to_obedience.py              # prints 'minutes to walking' and 'minutes to obedience'
+    python bench/time_to_obedience.py --max_minutes 30 --log_root logs/bench   # keep the run folder
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+import torch
+
+import train
+from analysis import obedience
+from analysis.locomotion import check_locomotion
+from analysis.rollout import PolicyRun
+from gym_envs.config import save_yaml
+from learning import runs
+from learning.runs import DeterministicActor
+
+MAX_ERROR = 0.15  # [m/s]
+MIN_SHARE = 0.8  # of robots walking the started gait (sigma = 0) or a regular one (sigma = 1)
+
+
+def walks(check) -> bool:
+    return check.tracking_error < MAX_ERROR and check.falls == 0
+
+
+def obeys(result: obedience.Obedience) -> bool:
+    started_ok = all(s.obeyed >= MIN_SHARE and abs(s.velocity - 1.0) <= MAX_ERROR and s.falls == 0
+                     for s in result.started.values())
+    settling = result.settling
+    return started_ok and settling.regular_at_10s >= MIN_SHARE and settling.falls == 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--profile", default="cpu_fast")
+    parser.add_argument("--eval_every", type=int, default=10, help="PPO iterations between evaluations")
+    parser.add_argument("--max_minutes", type=float, default=30.0, help="training time before giving up")
+    parser.add_argument("--num_threads", type=int, default=2)
+    parser.add_argument("--eval_envs", type=int, default=16)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--log_root", default=None, help="keep the run here (default: a temporary folder)")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    args = parser.parse_args(argv)
+
+    torch.set_num_threads(args.num_threads)
+    log_root = args.log_root or tempfile.mkdtemp(prefix="time_to_obedience_")
+    train_argv = ["--task", "mini_cheetah_osc", "--orc", "111", "--profile", args.profile, "--seed", str(args.seed),
+                  "--num_threads", str(args.num_threads), "--max_iterations", "1000000"]
+    for override in args.overrides:
+        train_argv += ["--set", override]
+    setup = train.prepare(train.build_parser().parse_args(train_argv))
+    runner, env_cfg, train_cfg = setup.runner, setup.env_cfg, setup.train_cfg
+    run_dir = runs.create_run_dir(log_root, "time_to_obedience", f"{args.profile}_seed{args.seed}")
+    save_yaml(env_cfg, os.path.join(run_dir, runs.ENV_YAML))
+    save_yaml(train_cfg, os.path.join(run_dir, runs.TRAIN_YAML))
+    runner.attach_run_dir(run_dir, progress_prefix="[time_to_obedience] ")
+    steps_per_iteration = env_cfg.env.num_envs * train_cfg.num_steps_per_env
+    print(f"profile {args.profile}: {env_cfg.env.num_envs} envs x {train_cfg.num_steps_per_env} steps, "
+          f"{runner.describe()}; run folder {run_dir}", flush=True)
+
+    clock, walking, obedient = 0.0, None, None
+    while clock < args.max_minutes * 60 and obedient is None:
+        start = time.perf_counter()
+        first = runner.current_learning_iteration == 0
+        runner.train(runner.current_learning_iteration + args.eval_every, init_at_random_ep_len=first)
+        clock += time.perf_counter() - start
+        it = runner.current_learning_iteration
+        actor = DeterministicActor(runner.alg.get_policy())
+        check = check_locomotion(actor, env_cfg, command=1.0, num_envs=args.eval_envs, num_threads=args.num_threads)
+        head = f"eval | it {it} | {clock / 60:6.2f} min | {it * steps_per_iteration / 1e6:6.2f} M steps"
+        print(f"{head} | {check.summary()}", flush=True)
+        if walking is None and walks(check):
+            walking = (clock / 60, it, check)
+        if walking is not None:  # obedience is only worth its evaluation time once the policy walks
+            (result,) = obedience.measure([PolicyRun(f"it {it}", env_cfg, actor)], robots=args.eval_envs,
+                                          settle_robots=args.eval_envs, settle_duration_s=10.0,
+                                          num_threads=args.num_threads, progress=False)
+            print(f"{head} | {result.summary()}", flush=True)
+            if obeys(result):
+                obedient = (clock / 60, it, result)
+    runner.save(runs.checkpoint_path(run_dir, runner.current_learning_iteration))
+    for name, reached in (("walking", walking), ("obedience", obedient)):
+        if reached is None:
+            print(f"minutes to {name}: not reached within {args.max_minutes:g}")
+        else:
+            minutes, it, measured = reached
+            print(f"minutes to {name}: {minutes:.2f} (iteration {it}; {measured.summary()})")
+    return 0 if obedient is not None else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
