@@ -88,6 +88,31 @@ def test_orc_c0_means_no_coupling_anywhere():
     assert env.coupling[:32].mean() == pytest.approx(4.0, abs=0.2)
 
 
+def test_coupling_off_share_of_episodes():
+    env = osc_env(256, orc="111", coupling_off_prob=0.5)
+    env.reset()
+    off = env.coupling_on[:, 0] == 0.0
+    assert 0.35 < off.float().mean() < 0.65  # drawn per episode
+    env.commands[:128, 0] = 0.0  # standing ones too
+    env.commands[128:, 0] = 1.0
+    env._pre_physics_step()
+    assert torch.all(env.coupling[off] == 0.0)
+    assert torch.all(env.coupling[~off] > 0.0)
+    first = env.coupling_on.clone()
+    env._reset_task_state(torch.arange(256))
+    assert not torch.equal(first, env.coupling_on)  # redrawn at every reset
+
+
+def test_oscillator_gait_mix_is_logged():
+    env = osc_env(16, ["osc.init=trot", "osc.process_noise_std=0"], orc="110")
+    env.reset()
+    env.commands[:, 0] = 1.0
+    _, _, _, extras = env.step(torch.zeros(16, 12))
+    log = extras["log"]
+    assert log["Oscillator_gait/trot"] == pytest.approx(1.0)  # sigma = 0 keeps the started pattern
+    assert sum(float(log[f"Oscillator_gait/{g}"]) for g in ("trot", "pace", "bound", "pronk", "transition")) == 1.0
+
+
 def test_unknown_task_lists_the_known_ones():
     with pytest.raises(UnknownTaskError, match="unknown task 'mini_cheetah_os'; known tasks: mini_cheetah, mini_cheetah_osc"):
         make_env("mini_cheetah_os")
