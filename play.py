@@ -30,7 +30,11 @@ backend; MUJOCO_GL defaults to egl when there is no display). Without --headless
 display, a passive MuJoCo viewer shows robot 0: arrow keys up/down change v_x by 0.5 m/s,
 left/right the yaw rate by 0.5 rad/s, comma/period v_y by 0.25 m/s; it runs until the window
 closes unless --duration is given. --export writes the TorchScript and ONNX policy (input: the
-actor observation, batch 1 for ONNX; output: actions) to <run>/exported/.
+actor observation, batch 1 for ONNX; output: actions) to <run>/exported/, both ONNX files with deployment metadata (observation terms in order
+with their scales, action scale, default joint positions, Kp/Kd, control and physics rates, ORC and
+oscillator constants), and for oscillator tasks controller.onnx: the whole controller in one graph
+(raw readings, per-substep foot forces, command and phases in; joint targets and new phases out;
+see learning/export.py).
 """
 
 from __future__ import annotations
@@ -83,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num_threads", type=int, help="CPU threads of the physics and of torch")
     p.add_argument("--headless", action="store_true", help="never open a viewer window")
     p.add_argument("--video", metavar="FILE.mp4", help="render robot 0 to this video")
-    p.add_argument("--export", action="store_true", help="write exported/policy.pt and policy.onnx in the run")
+    p.add_argument("--export", action="store_true", help="write exported/policy.pt, policy.onnx and controller.onnx (with metadata) in the run")
     return p
 
 
@@ -322,8 +326,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"policy {session.checkpoint} | task {session.task_name}"
               + (f" (ORC {session.orc})" if session.orc else "") + f" | {session.env.num_envs} robots")
         if args.export:
-            jit_path, onnx_path = session.runner.export(os.path.join(session.run_dir, runs.EXPORT_DIR))
-            print(f"exported {jit_path} and {onnx_path}")
+            from learning.export import export_deployment
+
+            paths = export_deployment(session.runner, session.task, os.path.join(session.run_dir, runs.EXPORT_DIR),
+                                      session.checkpoint)
+            print(f"exported {', '.join(paths)}")
 
         interactive = not args.headless and _HAS_DISPLAY and video is None
         if interactive:

@@ -18,12 +18,9 @@ from __future__ import annotations
 import contextlib
 import datetime
 import io
-import logging
-import os
 import signal
 import statistics
 import time
-import warnings
 
 import torch
 from rsl_rl.runners import OnPolicyRunner
@@ -228,32 +225,3 @@ class TaskRunner(OnPolicyRunner):
         if self.alg.load(data, load_cfg, strict):
             self.current_learning_iteration = int(data.get("iter", 0))
         return data.get("infos")
-
-    def export(self, directory: str) -> tuple[str, str]:
-        """TorchScript and ONNX of the deterministic actor (normaliser included); returns both paths.
-
-        The ONNX file is self-contained (torch's exporter may put the weights in a side file; they
-        are folded back in) and takes a batch of one observation.
-        """
-        import onnx
-
-        os.makedirs(directory, exist_ok=True)
-        jit_path, onnx_path = os.path.join(directory, "policy.pt"), os.path.join(directory, "policy.onnx")
-        onnx_logger = logging.getLogger("torch.onnx")
-        level = onnx_logger.level
-        onnx_logger.setLevel(logging.ERROR)  # torch's exporter warns about optional packages it does not need
-        try:
-            with quiet(), contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # torch.jit.script's deprecation notice
-                self.export_policy_to_jit(directory, os.path.basename(jit_path))
-                self.export_policy_to_onnx(directory, os.path.basename(onnx_path))
-        finally:
-            onnx_logger.setLevel(level)
-        header = onnx.load(onnx_path, load_external_data=False)
-        side_files = {e.value for t in header.graph.initializer for e in t.external_data if e.key == "location"}
-        onnx.save_model(onnx.load(onnx_path), onnx_path)  # weights inline
-        for name in side_files:
-            side = os.path.join(directory, os.path.basename(name))
-            if os.path.isfile(side):
-                os.remove(side)
-        return jit_path, onnx_path
