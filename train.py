@@ -30,6 +30,13 @@ Ctrl-C stops at the next env step and saves model_<completed iterations>.pt (exi
 a second Ctrl-C aborts without saving. Errors in the inputs print one line and exit with status 1
 before anything is written.
 
+Defaults that fit the machine (learning/machine.py). Without --device the run uses CUDA when torch
+sees a device, else the CPU; without --profile it trains the paper's settings on CUDA and the CPU
+recipe cpu_fast (1024 robots x 24 steps, 300 iterations) on the CPU; without --sim it simulates with
+MuJoCo Warp on CUDA when the gpu extra is installed. The first lines of a run say what was chosen,
+why, the expected duration (for the CPU, from the rate measured on a 2-core machine) and the flag
+that picks the other settings. A resumed run keeps its own profile and physics.
+
 Devices. --device cpu|cuda puts the task's tensors and the learner there; the 'mujoco' physics
 always runs on CPU threads (--num_threads, which also caps torch's CPU threads). Multi-GPU
 (rsl-rl's data-parallel PPO, one process per GPU, each with --num_envs robots):
@@ -69,10 +76,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint", type=int, default=-1, help="iteration to resume from (-1: the newest)")
     p.add_argument("--experiment_name", help="experiment folder under the log root")
     p.add_argument("--run_name", help="suffix of the run folder name (default seed<seed>)")
-    p.add_argument("--device", choices=("cpu", "cuda"), help="task tensors and learner (default cpu)")
-    p.add_argument("--sim", choices=("mujoco", "warp"), help="physics backend (sets sim.backend)")
+    p.add_argument("--device", choices=("cpu", "cuda"), help="task tensors and learner (default: cuda when torch sees "
+                   "a CUDA device, else cpu)")
+    p.add_argument("--sim", choices=("mujoco", "warp"), help="physics backend, sets sim.backend (default: warp on cuda "
+                   "when the gpu extra is installed, else mujoco)")
     p.add_argument("--num_threads", type=int, help="CPU threads of the physics and of torch (0: all cores)")
-    p.add_argument("--profile", help="named override set from learning.runner_config.PROFILES (paper, cpu_fast)")
+    p.add_argument("--profile", help="named override set from learning.runner_config.PROFILES: paper, cpu_fast "
+                   "(default: paper on cuda, cpu_fast on cpu; a resumed run keeps its own)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="config override, repeatable: train.<key> for the train config, other keys for the env config")
     p.add_argument("--log_root", help="folder of experiments (default: $ORCGYM_LOG_ROOT or <repo>/logs)")
@@ -83,6 +93,12 @@ def _distributed() -> tuple[int, int, int]:
     """(world size, global rank, local rank) from torchrun's environment."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     return world, int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
+
+
+def _cuda_available() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
 
 
 def _resolve_device(requested: str | None, world: int, local_rank: int) -> str:
@@ -121,10 +137,13 @@ def prepare(args: argparse.Namespace):
         profile_overrides,
         train_cfg_class,
     )
+    from learning.machine import choose_defaults, warp_installed
     from learning.vec_env import TaskVecEnv
 
     log_root = args.log_root or runs.default_log_root()
     world, rank, local_rank = _distributed()
+    defaults = choose_defaults(args.device or ("cuda" if world > 1 else None), args.profile, args.sim,
+                               cuda_available=_cuda_available(), warp_available=warp_installed(), resume=args.resume)
 
     resume_from = None
     if args.resume:
@@ -143,12 +162,12 @@ def prepare(args: argparse.Namespace):
         env_cfg = env_cfg_class(task)()
         train_cfg = train_cfg_class(task)()
 
-    env_cfg, train_cfg = apply_split_overrides(env_cfg, train_cfg, profile_overrides(args.profile) + args.overrides)
+    env_cfg, train_cfg = apply_split_overrides(env_cfg, train_cfg, profile_overrides(defaults.profile) + args.overrides)
     if args.orc is not None and not hasattr(env_cfg, "osc"):
         raise ConfigError(f"--orc needs a task with oscillators; {task!r} has none")
     flags = {
         "osc.orc": args.orc, "env.num_envs": args.num_envs,
-        "sim.backend": args.sim, "sim.num_threads": args.num_threads,
+        "sim.backend": defaults.sim, "sim.num_threads": args.num_threads,
         "train.max_iterations": args.max_iterations, "train.seed": args.seed,
         "train.experiment_name": args.experiment_name, "train.run_name": args.run_name,
     }
@@ -157,8 +176,8 @@ def prepare(args: argparse.Namespace):
     )
     if hasattr(env_cfg, "osc"):
         parse_orc(env_cfg.osc.orc)
-    if args.profile:
-        train_cfg.profile = args.profile
+    if defaults.profile:
+        train_cfg.profile = defaults.profile
     if train_cfg.seed == -1:
         train_cfg.seed = random.SystemRandom().randrange(10000)
     # --orc names the experiment unless one is given; a resumed run keeps its own otherwise.
@@ -167,7 +186,7 @@ def prepare(args: argparse.Namespace):
     if not train_cfg.run_name:
         train_cfg.run_name = f"seed{train_cfg.seed}"
     runs.check_folder_names(train_cfg.experiment_name, train_cfg.run_name)
-    device = _resolve_device(args.device, world, local_rank)
+    device = _resolve_device(defaults.device, world, local_rank)
     env_cfg.env.device = device
     env_cfg.env.seed = train_cfg.seed + rank
     if resume_from is not None:
@@ -185,7 +204,7 @@ def prepare(args: argparse.Namespace):
                 f"checkpoint {resume_from} is at iteration {runner.current_learning_iteration} and max_iterations is "
                 f"{train_cfg.max_iterations}; pass a larger --max_iterations"
             )
-    return Setup(task, env_cfg, train_cfg, runner, log_root, rank)
+    return Setup(task, env_cfg, train_cfg, runner, log_root, rank, world, defaults)
 
 
 @dataclass
@@ -198,6 +217,8 @@ class Setup:
     runner: Any  # learning.runner.TaskRunner
     log_root: str
     rank: int
+    world: int
+    defaults: Any  # learning.machine.RunDefaults: what was chosen for the flags left open, and why
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -207,6 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     from gym_envs.config import save_yaml
     from gym_envs.sim import SimSetupError
     from learning import runs
+    from learning.machine import expected_duration
     from learning.runner import StopRequest
 
     threads_before = torch.get_num_threads()
@@ -225,6 +247,10 @@ def main(argv: list[str] | None = None) -> int:
             save_yaml(train_cfg, os.path.join(run_dir, runs.TRAIN_YAML))
             runner.attach_run_dir(run_dir, progress_prefix=f"[{train_cfg.experiment_name}] ")
             resuming = f" (resuming {train_cfg.resumed_from})" if train_cfg.resumed_from else ""
+            print(setup.defaults.describe(env_cfg.sim.backend))
+            print(expected_duration(env_cfg.env.device.split(":")[0], env_cfg.sim.backend, env_cfg.env.num_envs,
+                                    train_cfg.num_steps_per_env,
+                                    train_cfg.max_iterations - runner.current_learning_iteration, setup.world))
             print(f"task {setup.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
             print(f"run folder {run_dir}{resuming}", flush=True)
 
