@@ -42,9 +42,10 @@ from __future__ import annotations
 import os
 import sys
 
-_HAS_DISPLAY = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-if not _HAS_DISPLAY:
-    os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering; must be set before mujoco is imported
+from learning.video import VideoRecorder, has_display, prefer_offscreen_gl
+
+prefer_offscreen_gl()  # must run before mujoco is imported
+_HAS_DISPLAY = has_display()
 
 import argparse  # noqa: E402
 import time  # noqa: E402
@@ -53,8 +54,6 @@ from gym_envs.config import ConfigError  # noqa: E402
 from gym_envs.evaluation import evaluation_overrides  # noqa: E402
 
 DEFAULT_DURATION_S = 10.0
-VIDEO_FPS = 50
-VIDEO_SIZE = (480, 640)  # height, width
 KEY_UP, KEY_DOWN, KEY_LEFT, KEY_RIGHT, KEY_COMMA, KEY_PERIOD = 265, 264, 263, 262, 44, 46
 
 
@@ -227,43 +226,6 @@ class Tracker:
         self.n = self.falls = 0
 
 
-class VideoRecorder:
-    def __init__(self, session: Session, path: str):
-        import imageio
-        import mujoco
-
-        self.mujoco = mujoco
-        self.sim = session.task.sim
-        self.model = self.sim.model
-        self.data = mujoco.MjData(self.model)
-        height = min(VIDEO_SIZE[0], self.model.vis.global_.offheight)
-        width = min(VIDEO_SIZE[1], self.model.vis.global_.offwidth)
-        try:
-            self.renderer = mujoco.Renderer(self.model, height, width)
-        except Exception as err:  # no usable OpenGL platform
-            gl = os.environ.get("MUJOCO_GL", "(unset)")
-            raise ConfigError(f"offscreen rendering failed with MUJOCO_GL={gl} ({' '.join(str(err).split())}); "
-                              f"try MUJOCO_GL=egl or MUJOCO_GL=osmesa") from None
-        self.every = max(1, round(1.0 / (session.env.dt * VIDEO_FPS)))
-        fps = 1.0 / (session.env.dt * self.every)
-        self.path = path
-        self.writer = imageio.get_writer(path, fps=fps, macro_block_size=8)
-        self.frames = 0
-
-    def capture(self, step: int) -> None:
-        if step % self.every:
-            return
-        self.sim.copy_state_to(0, self.data)
-        self.mujoco.mj_forward(self.model, self.data)
-        self.renderer.update_scene(self.data, camera="track")
-        self.writer.append_data(self.renderer.render())
-        self.frames += 1
-
-    def close(self) -> None:
-        self.writer.close()
-        self.renderer.close()
-
-
 class Viewer:
     """Passive MuJoCo viewer of robot 0; arrow keys change the command."""
 
@@ -319,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             session = Session(args)
             if args.video:
-                video = VideoRecorder(session, args.video)
+                video = VideoRecorder(session.task.sim, session.env.dt, args.video)
         except (ConfigError, SimSetupError) as err:
             print(f"play.py: error: {runs.one_line(err)}", file=sys.stderr)
             return 1

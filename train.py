@@ -85,6 +85,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: paper on cuda, cpu_fast on cpu; a resumed run keeps its own)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="config override, repeatable: train.<key> for the train config, other keys for the env config")
+    p.add_argument("--logger", choices=("tensorboard", "wandb", "neptune"),
+                   help="where metrics go besides the run folder's tensorboard events (default tensorboard); "
+                   "wandb and neptune need their extra: pip install -e \".[wandb]\" / \".[neptune]\"")
+    p.add_argument("--log_project_name", help="W&B or Neptune project (default orcgym)")
+    p.add_argument("--video", type=int, metavar="N", help="every N iterations, record a clip of robot 0 into "
+                   "<run>/videos/iter_<it>.mp4 (uploaded to W&B with --logger wandb; offscreen, MUJOCO_GL=egl)")
+    p.add_argument("--video_length", type=float, default=2.0, metavar="SECONDS",
+                   help="simulated seconds per --video clip (default 2)")
     p.add_argument("--log_root", help="folder of experiments (default: $ORCGYM_LOG_ROOT or <repo>/logs)")
     return p
 
@@ -133,6 +141,7 @@ def prepare(args: argparse.Namespace):
     from learning.runner import TaskRunner
     from learning.runner_config import (
         apply_split_overrides,
+        check_logger_ready,
         derived_experiment_name,
         profile_overrides,
         train_cfg_class,
@@ -170,6 +179,7 @@ def prepare(args: argparse.Namespace):
         "sim.backend": defaults.sim, "sim.num_threads": args.num_threads,
         "train.max_iterations": args.max_iterations, "train.seed": args.seed,
         "train.experiment_name": args.experiment_name, "train.run_name": args.run_name,
+        "train.logger": args.logger, "train.log_project_name": args.log_project_name,
     }
     env_cfg, train_cfg = apply_split_overrides(
         env_cfg, train_cfg, [f"{key}={value}" for key, value in flags.items() if value is not None]
@@ -186,6 +196,7 @@ def prepare(args: argparse.Namespace):
     if not train_cfg.run_name:
         train_cfg.run_name = f"seed{train_cfg.seed}"
     runs.check_folder_names(train_cfg.experiment_name, train_cfg.run_name)
+    check_logger_ready(train_cfg)
     device = _resolve_device(defaults.device, world, local_rank)
     env_cfg.env.device = device
     env_cfg.env.seed = train_cfg.seed + rank
@@ -231,12 +242,21 @@ def main(argv: list[str] | None = None) -> int:
     from learning.machine import expected_duration
     from learning.runner import StopRequest
 
+    if args.video is not None:
+        from learning.video import prefer_offscreen_gl
+
+        prefer_offscreen_gl()  # before mujoco is imported
     threads_before = torch.get_num_threads()
     try:
         if args.num_threads:
             torch.set_num_threads(args.num_threads)
         try:
             setup = prepare(args)
+            if args.video is not None and setup.rank == 0:
+                from learning.video import TrainingVideo
+
+                task = setup.runner.env.task
+                setup.runner.video = TrainingVideo(task.sim, task.dt, args.video, args.video_length)
         except (ConfigError, SimSetupError) as err:
             print(f"train.py: error: {runs.one_line(err)}", file=sys.stderr)
             return 1
