@@ -34,7 +34,7 @@ class RunDefaults:
         text = f"settings: device {self.device}, profile {self.profile or 'as the run had it'}, physics {physics}"
         if not self.reasons:
             return f"{text} (as given)"
-        return f"{text}, since {'; '.join(self.reasons)}; {self.alternative}"
+        return f"{text} ({'; '.join(self.reasons)}); {self.alternative}"
 
 
 def warp_installed() -> bool:
@@ -50,15 +50,19 @@ def choose_defaults(device: str | None, profile: str | None, sim: str | None, *,
         reasons.append("torch sees a CUDA device" if cuda_available else "torch sees no CUDA device")
     if profile is None and not resume:
         profile = GPU_PROFILE if device == "cuda" else CPU_PROFILE
-        reasons.append(f"profile {profile} suits {device}")
+        reasons.append("cpu_fast is the CPU recipe" if profile == CPU_PROFILE else "the paper's settings suit a GPU")
     if sim is None and not resume and device == "cuda":
         sim = "warp" if warp_available else "mujoco"
         reasons.append("MuJoCo Warp is installed" if warp_available
-                       else "MuJoCo Warp is not installed (pip install -e \".[gpu]\" keeps physics on the GPU)")
+                       else "MuJoCo Warp is not installed: pip install -e \".[gpu]\" keeps physics on the GPU")
     if resume and profile is None:
         reasons.append("a resumed run keeps its own profile and physics")
-    alternative = ("--device cpu for the CPU recipe (profile cpu_fast)" if device == "cuda"
-                   else "--profile paper for the paper's settings (4096 robots x 32 steps, 2000 iterations)")
+    if resume:
+        alternative = "--device cpu or cuda picks the device"
+    elif device == "cuda":
+        alternative = "--device cpu for the CPU recipe (profile cpu_fast)"
+    else:
+        alternative = "--profile paper for the paper's settings (4096 robots x 32 steps, 2000 iterations)"
     return RunDefaults(device, profile, sim, tuple(reasons), alternative)
 
 

@@ -61,7 +61,7 @@ def test_a_run_says_what_it_chose_why_and_how_long_it_takes(tmp_path, capsys, mo
                        "--num_threads", "1", "--max_iterations", "1", "--set", "train.num_steps_per_env=4"])
     assert code == 0
     first = capsys.readouterr().out.splitlines()[:2]
-    assert first[0].startswith("settings: device cpu, profile cpu_fast, physics mujoco, since torch sees no CUDA")
+    assert first[0].startswith("settings: device cpu, profile cpu_fast, physics mujoco (torch sees no CUDA device; cpu_fast is")
     assert first[1].startswith("expected duration: about 1 s for 1 iterations x 64 env steps")
     (experiment,) = os.listdir(tmp_path)
     (run,) = os.listdir(tmp_path / experiment)
