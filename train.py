@@ -37,6 +37,12 @@ MuJoCo Warp on CUDA when the gpu extra is installed. The first lines of a run sa
 why, the expected duration (for the CPU, from the rate measured on a 2-core machine) and the flag
 that picks the other settings. A resumed run keeps its own profile and physics.
 
+Monitoring. --logger wandb|neptune (project --log_project_name) adds rsl-rl-lib's W&B or Neptune
+writer to the tensorboard events (extras: pip install -e ".[wandb]" / ".[neptune]"; W&B offline:
+WANDB_MODE=offline). --video N records --video_length seconds of robot 0 every N iterations into
+<run>/videos/iter_<it>.mp4, offscreen (MUJOCO_GL=egl without a display, osmesa as the fallback),
+and W&B receives each clip.
+
 Devices. --device cpu|cuda puts the task's tensors and the learner there; the 'mujoco' physics
 always runs on CPU threads (--num_threads, which also caps torch's CPU threads). Multi-GPU
 (rsl-rl's data-parallel PPO, one process per GPU, each with --num_envs robots):
