@@ -30,7 +30,11 @@ backend; MUJOCO_GL defaults to egl when there is no display). Without --headless
 display, a passive MuJoCo viewer shows robot 0: arrow keys up/down change v_x by 0.5 m/s,
 left/right the yaw rate by 0.5 rad/s, comma/period v_y by 0.25 m/s; it runs until the window
 closes unless --duration is given. --export writes the TorchScript and ONNX policy (input: the
-actor observation, batch 1 for ONNX; output: actions) to <run>/exported/.
+actor observation, batch 1 for ONNX; output: actions) to <run>/exported/, both ONNX files with deployment metadata (observation terms in order
+with their scales, action scale, default joint positions, Kp/Kd, control and physics rates, ORC and
+oscillator constants), and for oscillator tasks controller.onnx: the whole controller in one graph
+(raw readings, per-substep foot forces, command and phases in; joint targets and new phases out;
+see learning/export.py).
 """
 
 from __future__ import annotations
@@ -38,9 +42,10 @@ from __future__ import annotations
 import os
 import sys
 
-_HAS_DISPLAY = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-if not _HAS_DISPLAY:
-    os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering; must be set before mujoco is imported
+from learning.video import VideoRecorder, has_display, prefer_offscreen_gl
+
+prefer_offscreen_gl()  # must run before mujoco is imported
+_HAS_DISPLAY = has_display()
 
 import argparse  # noqa: E402
 import time  # noqa: E402
@@ -49,8 +54,6 @@ from gym_envs.config import ConfigError  # noqa: E402
 from gym_envs.evaluation import evaluation_overrides  # noqa: E402
 
 DEFAULT_DURATION_S = 10.0
-VIDEO_FPS = 50
-VIDEO_SIZE = (480, 640)  # height, width
 KEY_UP, KEY_DOWN, KEY_LEFT, KEY_RIGHT, KEY_COMMA, KEY_PERIOD = 265, 264, 263, 262, 44, 46
 
 
@@ -83,7 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num_threads", type=int, help="CPU threads of the physics and of torch")
     p.add_argument("--headless", action="store_true", help="never open a viewer window")
     p.add_argument("--video", metavar="FILE.mp4", help="render robot 0 to this video")
-    p.add_argument("--export", action="store_true", help="write exported/policy.pt and policy.onnx in the run")
+    p.add_argument("--export", action="store_true", help="write exported/policy.pt, policy.onnx and controller.onnx (with metadata) in the run")
     return p
 
 
@@ -223,43 +226,6 @@ class Tracker:
         self.n = self.falls = 0
 
 
-class VideoRecorder:
-    def __init__(self, session: Session, path: str):
-        import imageio
-        import mujoco
-
-        self.mujoco = mujoco
-        self.sim = session.task.sim
-        self.model = self.sim.model
-        self.data = mujoco.MjData(self.model)
-        height = min(VIDEO_SIZE[0], self.model.vis.global_.offheight)
-        width = min(VIDEO_SIZE[1], self.model.vis.global_.offwidth)
-        try:
-            self.renderer = mujoco.Renderer(self.model, height, width)
-        except Exception as err:  # no usable OpenGL platform
-            gl = os.environ.get("MUJOCO_GL", "(unset)")
-            raise ConfigError(f"offscreen rendering failed with MUJOCO_GL={gl} ({' '.join(str(err).split())}); "
-                              f"try MUJOCO_GL=egl or MUJOCO_GL=osmesa") from None
-        self.every = max(1, round(1.0 / (session.env.dt * VIDEO_FPS)))
-        fps = 1.0 / (session.env.dt * self.every)
-        self.path = path
-        self.writer = imageio.get_writer(path, fps=fps, macro_block_size=8)
-        self.frames = 0
-
-    def capture(self, step: int) -> None:
-        if step % self.every:
-            return
-        self.sim.copy_state_to(0, self.data)
-        self.mujoco.mj_forward(self.model, self.data)
-        self.renderer.update_scene(self.data, camera="track")
-        self.writer.append_data(self.renderer.render())
-        self.frames += 1
-
-    def close(self) -> None:
-        self.writer.close()
-        self.renderer.close()
-
-
 class Viewer:
     """Passive MuJoCo viewer of robot 0; arrow keys change the command."""
 
@@ -315,15 +281,18 @@ def main(argv: list[str] | None = None) -> int:
         try:
             session = Session(args)
             if args.video:
-                video = VideoRecorder(session, args.video)
+                video = VideoRecorder(session.task.sim, session.env.dt, args.video)
         except (ConfigError, SimSetupError) as err:
             print(f"play.py: error: {runs.one_line(err)}", file=sys.stderr)
             return 1
         print(f"policy {session.checkpoint} | task {session.task_name}"
               + (f" (ORC {session.orc})" if session.orc else "") + f" | {session.env.num_envs} robots")
         if args.export:
-            jit_path, onnx_path = session.runner.export(os.path.join(session.run_dir, runs.EXPORT_DIR))
-            print(f"exported {jit_path} and {onnx_path}")
+            from learning.export import export_deployment
+
+            paths = export_deployment(session.runner, session.task, os.path.join(session.run_dir, runs.EXPORT_DIR),
+                                      session.checkpoint)
+            print(f"exported {', '.join(paths)}")
 
         interactive = not args.headless and _HAS_DISPLAY and video is None
         if interactive:

@@ -12,7 +12,7 @@ setup(
     package_data={"": ["*.xml"]},
     install_requires=[
         "torch>=2.2,<3",
-        "rsl-rl-lib>=5.5,<6",
+        "rsl-rl-lib>=5.5,<5.6",  # learning/runner.py overrides internals; tests/test_rsl_rl_contract.py checks them
         "mujoco>=4.0,<5",
         "numpy>=1.24",
         "pyyaml>=6",
@@ -26,5 +26,7 @@ setup(
     extras_require={
         "test": ["pytest>=7"],
         "gpu": ["warp-lang>=1.9", "mujoco-warp>=4.0"],
+        "wandb": ["wandb>=0.17"],  # train.py --logger wandb
+        "neptune": ["neptune>=1.0"],  # train.py --logger neptune
     },
 )

@@ -43,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
     parser.add_argument("--max_iterations", type=int, default=None, help="per run (default: the train config's)")
     parser.add_argument("--num_envs", type=int, default=None)
-    parser.add_argument("--profile", default=None)
+    parser.add_argument("--profile", default=None, help="as in train.py (default: cpu_fast on cpu, paper on cuda)")
     parser.add_argument("--num_threads", type=int, default=None)
     parser.add_argument("--device", choices=("cpu", "cuda"), default=None)
     parser.add_argument("--sim", choices=("mujoco", "warp"), default=None)

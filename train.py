@@ -30,6 +30,19 @@ Ctrl-C stops at the next env step and saves model_<completed iterations>.pt (exi
 a second Ctrl-C aborts without saving. Errors in the inputs print one line and exit with status 1
 before anything is written.
 
+Defaults that fit the machine (learning/machine.py). Without --device the run uses CUDA when torch
+sees a device, else the CPU; without --profile it trains the paper's settings on CUDA and the CPU
+recipe cpu_fast (1024 robots x 24 steps, 300 iterations) on the CPU; without --sim it simulates with
+MuJoCo Warp on CUDA when the gpu extra is installed. The first lines of a run say what was chosen,
+why, the expected duration (for the CPU, from the rate measured on a 2-core machine) and the flag
+that picks the other settings. A resumed run keeps its own profile and physics.
+
+Monitoring. --logger wandb|neptune (project --log_project_name) adds rsl-rl-lib's W&B or Neptune
+writer to the tensorboard events (extras: pip install -e ".[wandb]" / ".[neptune]"; W&B offline:
+WANDB_MODE=offline). --video N records --video_length seconds of robot 0 every N iterations into
+<run>/videos/iter_<it>.mp4, offscreen (MUJOCO_GL=egl without a display, osmesa as the fallback),
+and W&B receives each clip.
+
 Devices. --device cpu|cuda puts the task's tensors and the learner there; the 'mujoco' physics
 always runs on CPU threads (--num_threads, which also caps torch's CPU threads). Multi-GPU
 (rsl-rl's data-parallel PPO, one process per GPU, each with --num_envs robots):
@@ -69,12 +82,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint", type=int, default=-1, help="iteration to resume from (-1: the newest)")
     p.add_argument("--experiment_name", help="experiment folder under the log root")
     p.add_argument("--run_name", help="suffix of the run folder name (default seed<seed>)")
-    p.add_argument("--device", choices=("cpu", "cuda"), help="task tensors and learner (default cpu)")
-    p.add_argument("--sim", choices=("mujoco", "warp"), help="physics backend (sets sim.backend)")
+    p.add_argument("--device", choices=("cpu", "cuda"), help="task tensors and learner (default: cuda when torch sees "
+                   "a CUDA device, else cpu)")
+    p.add_argument("--sim", choices=("mujoco", "warp"), help="physics backend, sets sim.backend (default: warp on cuda "
+                   "when the gpu extra is installed, else mujoco)")
     p.add_argument("--num_threads", type=int, help="CPU threads of the physics and of torch (0: all cores)")
-    p.add_argument("--profile", help="named override set from learning.runner_config.PROFILES (paper, cpu_fast)")
+    p.add_argument("--profile", help="named override set from learning.runner_config.PROFILES: paper, cpu_fast "
+                   "(default: paper on cuda, cpu_fast on cpu; a resumed run keeps its own)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="config override, repeatable: train.<key> for the train config, other keys for the env config")
+    p.add_argument("--logger", choices=("tensorboard", "wandb", "neptune"),
+                   help="where metrics go besides the run folder's tensorboard events (default tensorboard); "
+                   "wandb and neptune need their extra: pip install -e \".[wandb]\" / \".[neptune]\"")
+    p.add_argument("--log_project_name", help="W&B or Neptune project (default orcgym)")
+    p.add_argument("--video", type=int, metavar="N", help="every N iterations, record a clip of robot 0 into "
+                   "<run>/videos/iter_<it>.mp4 (uploaded to W&B with --logger wandb; offscreen, MUJOCO_GL=egl)")
+    p.add_argument("--video_length", type=float, default=2.0, metavar="SECONDS",
+                   help="simulated seconds per --video clip (default 2)")
     p.add_argument("--log_root", help="folder of experiments (default: $ORCGYM_LOG_ROOT or <repo>/logs)")
     return p
 
@@ -83,6 +107,12 @@ def _distributed() -> tuple[int, int, int]:
     """(world size, global rank, local rank) from torchrun's environment."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     return world, int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
+
+
+def _cuda_available() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
 
 
 def _resolve_device(requested: str | None, world: int, local_rank: int) -> str:
@@ -117,14 +147,18 @@ def prepare(args: argparse.Namespace):
     from learning.runner import TaskRunner
     from learning.runner_config import (
         apply_split_overrides,
+        check_logger_ready,
         derived_experiment_name,
         profile_overrides,
         train_cfg_class,
     )
+    from learning.machine import choose_defaults, warp_installed
     from learning.vec_env import TaskVecEnv
 
     log_root = args.log_root or runs.default_log_root()
     world, rank, local_rank = _distributed()
+    defaults = choose_defaults(args.device or ("cuda" if world > 1 else None), args.profile, args.sim,
+                               cuda_available=_cuda_available(), warp_available=warp_installed(), resume=args.resume)
 
     resume_from = None
     if args.resume:
@@ -143,22 +177,23 @@ def prepare(args: argparse.Namespace):
         env_cfg = env_cfg_class(task)()
         train_cfg = train_cfg_class(task)()
 
-    env_cfg, train_cfg = apply_split_overrides(env_cfg, train_cfg, profile_overrides(args.profile) + args.overrides)
+    env_cfg, train_cfg = apply_split_overrides(env_cfg, train_cfg, profile_overrides(defaults.profile) + args.overrides)
     if args.orc is not None and not hasattr(env_cfg, "osc"):
         raise ConfigError(f"--orc needs a task with oscillators; {task!r} has none")
     flags = {
         "osc.orc": args.orc, "env.num_envs": args.num_envs,
-        "sim.backend": args.sim, "sim.num_threads": args.num_threads,
+        "sim.backend": defaults.sim, "sim.num_threads": args.num_threads,
         "train.max_iterations": args.max_iterations, "train.seed": args.seed,
         "train.experiment_name": args.experiment_name, "train.run_name": args.run_name,
+        "train.logger": args.logger, "train.log_project_name": args.log_project_name,
     }
     env_cfg, train_cfg = apply_split_overrides(
         env_cfg, train_cfg, [f"{key}={value}" for key, value in flags.items() if value is not None]
     )
     if hasattr(env_cfg, "osc"):
         parse_orc(env_cfg.osc.orc)
-    if args.profile:
-        train_cfg.profile = args.profile
+    if defaults.profile:
+        train_cfg.profile = defaults.profile
     if train_cfg.seed == -1:
         train_cfg.seed = random.SystemRandom().randrange(10000)
     # --orc names the experiment unless one is given; a resumed run keeps its own otherwise.
@@ -167,7 +202,8 @@ def prepare(args: argparse.Namespace):
     if not train_cfg.run_name:
         train_cfg.run_name = f"seed{train_cfg.seed}"
     runs.check_folder_names(train_cfg.experiment_name, train_cfg.run_name)
-    device = _resolve_device(args.device, world, local_rank)
+    check_logger_ready(train_cfg)
+    device = _resolve_device(defaults.device, world, local_rank)
     env_cfg.env.device = device
     env_cfg.env.seed = train_cfg.seed + rank
     if resume_from is not None:
@@ -185,7 +221,7 @@ def prepare(args: argparse.Namespace):
                 f"checkpoint {resume_from} is at iteration {runner.current_learning_iteration} and max_iterations is "
                 f"{train_cfg.max_iterations}; pass a larger --max_iterations"
             )
-    return Setup(task, env_cfg, train_cfg, runner, log_root, rank)
+    return Setup(task, env_cfg, train_cfg, runner, log_root, rank, world, defaults)
 
 
 @dataclass
@@ -198,6 +234,8 @@ class Setup:
     runner: Any  # learning.runner.TaskRunner
     log_root: str
     rank: int
+    world: int
+    defaults: Any  # learning.machine.RunDefaults: what was chosen for the flags left open, and why
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -207,14 +245,24 @@ def main(argv: list[str] | None = None) -> int:
     from gym_envs.config import save_yaml
     from gym_envs.sim import SimSetupError
     from learning import runs
+    from learning.machine import expected_duration
     from learning.runner import StopRequest
 
+    if args.video is not None:
+        from learning.video import prefer_offscreen_gl
+
+        prefer_offscreen_gl()  # before mujoco is imported
     threads_before = torch.get_num_threads()
     try:
         if args.num_threads:
             torch.set_num_threads(args.num_threads)
         try:
             setup = prepare(args)
+            if args.video is not None and setup.rank == 0:
+                from learning.video import TrainingVideo
+
+                task = setup.runner.env.task
+                setup.runner.video = TrainingVideo(task.sim, task.dt, args.video, args.video_length)
         except (ConfigError, SimSetupError) as err:
             print(f"train.py: error: {runs.one_line(err)}", file=sys.stderr)
             return 1
@@ -225,6 +273,10 @@ def main(argv: list[str] | None = None) -> int:
             save_yaml(train_cfg, os.path.join(run_dir, runs.TRAIN_YAML))
             runner.attach_run_dir(run_dir, progress_prefix=f"[{train_cfg.experiment_name}] ")
             resuming = f" (resuming {train_cfg.resumed_from})" if train_cfg.resumed_from else ""
+            print(setup.defaults.describe(env_cfg.sim.backend))
+            print(expected_duration(env_cfg.env.device.split(":")[0], env_cfg.sim.backend, env_cfg.env.num_envs,
+                                    train_cfg.num_steps_per_env,
+                                    train_cfg.max_iterations - runner.current_learning_iteration, setup.world))
             print(f"task {setup.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
             print(f"run folder {run_dir}{resuming}", flush=True)
 

@@ -2,7 +2,7 @@
 
 A fixed command that is never resampled, no time-outs, and every training randomness off unless
 asked for: observation noise, oscillator noise (process noise and the omega/sigma jitter), pushes,
-and domain randomisation with randomised resets. Returned as `section.key=value` overrides so a
+domain randomisation with randomised resets, and episodes drawn without coupling. Returned as `section.key=value` overrides so a
 run's saved config turns into its evaluation config with `gym_envs.config.apply_overrides`.
 """
 
@@ -44,4 +44,6 @@ def evaluation_overrides(
             "domain_rand.randomize_base_com=false",
             "init_state.mode=default",
         ]
+        if hasattr(cfg, "osc"):
+            items.append("osc.coupling_off_prob=0.0")  # episodes drawn with sigma = 0 are a training randomisation
     return items

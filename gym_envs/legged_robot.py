@@ -324,6 +324,14 @@ class LeggedRobot:
             parts.append(value)
         return torch.cat(parts, dim=1)
 
+    def observation_scales(self, group: str) -> dict[str, torch.Tensor]:
+        """The terms of an observation group in order, each with its per-element scale (the term is divided by it)."""
+        scales = {}
+        for name in getattr(self.cfg.observations, group):
+            width = getattr(self, f"_obs_{name}")().shape[1]
+            scales[name] = self._term_vector(self._obs_scale, self.cfg.observations.scales, name, width, 1.0)
+        return scales
+
     def _term_vector(self, cache: dict, table: dict, name: str, width: int, default: float) -> torch.Tensor:
         vec = cache.get(name)
         if vec is None:

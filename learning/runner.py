@@ -18,16 +18,15 @@ from __future__ import annotations
 import contextlib
 import datetime
 import io
-import logging
-import os
+import pathlib
 import signal
 import statistics
 import time
-import warnings
 
 import torch
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils import check_nan
+from rsl_rl.utils.log_writer import LogWriter
 from rsl_rl.utils.logger import Logger
 
 from learning import runs
@@ -103,6 +102,12 @@ class ProgressLogger(Logger):
         )
 
 
+    def save_video(self, path: str, it: int) -> None:
+        """Upload a clip finished after the last `log` (rsl-rl's `log` uploads the others; W&B only)."""
+        if isinstance(self.writer, LogWriter):
+            self.writer.save_video(pathlib.Path(path), it)
+
+
 class TaskRunner(OnPolicyRunner):
     """An OnPolicyRunner for a gym_envs task; `train_cfg` is a typed TrainCfg."""
 
@@ -116,11 +121,14 @@ class TaskRunner(OnPolicyRunner):
         )
         self.logger.git_status_repos = [runs.REPO_ROOT]
         self.log_dir = log_dir
+        self.video = None  # a learning.video.TrainingVideo records clips of robot 0 while training when set
 
     def attach_run_dir(self, run_dir: str, progress_prefix: str = "") -> None:
         """Where checkpoints and tensorboard events go (set before `train`)."""
         self.log_dir = self.logger.log_dir = run_dir
         self.logger.prefix = progress_prefix
+        if self.video is not None:
+            self.video.write_into(run_dir)
 
     # --- sizes ---------------------------------------------------------------------------------
 
@@ -166,12 +174,16 @@ class TaskRunner(OnPolicyRunner):
         try:
             for it in range(start, until):
                 t0 = time.perf_counter()
+                if self.video is not None:
+                    self.video.start_iteration(it)
                 with torch.inference_mode():
                     for _ in range(cfg["num_steps_per_env"]):
                         if stop.requested and not self.is_distributed:
                             break
                         actions = alg.act(obs)
                         obs, rewards, dones, extras = env.step(actions.to(env.device))
+                        if self.video is not None:
+                            self.video.after_step()
                         if cfg.get("check_for_nan", True):
                             check_nan(obs, rewards, dones)
                         obs, rewards, dones = obs.to(self.device), rewards.to(self.device), dones.to(self.device)
@@ -195,9 +207,13 @@ class TaskRunner(OnPolicyRunner):
                     self._save_iteration()
             self._save_iteration()
         finally:
+            last_clip = self.video.close() if self.video is not None else None
+            if last_clip is not None:
+                self.logger.save_video(last_clip, self.current_learning_iteration)
             if self.logger.writer is not None:
                 self.logger.writer.flush()
                 self.logger.writer.close()
+                self.logger.stop_logging_writer()  # W&B / Neptune: finish the remote run
         return finished
 
     def _stop_everywhere(self, stop: StopRequest) -> bool:
@@ -228,32 +244,3 @@ class TaskRunner(OnPolicyRunner):
         if self.alg.load(data, load_cfg, strict):
             self.current_learning_iteration = int(data.get("iter", 0))
         return data.get("infos")
-
-    def export(self, directory: str) -> tuple[str, str]:
-        """TorchScript and ONNX of the deterministic actor (normaliser included); returns both paths.
-
-        The ONNX file is self-contained (torch's exporter may put the weights in a side file; they
-        are folded back in) and takes a batch of one observation.
-        """
-        import onnx
-
-        os.makedirs(directory, exist_ok=True)
-        jit_path, onnx_path = os.path.join(directory, "policy.pt"), os.path.join(directory, "policy.onnx")
-        onnx_logger = logging.getLogger("torch.onnx")
-        level = onnx_logger.level
-        onnx_logger.setLevel(logging.ERROR)  # torch's exporter warns about optional packages it does not need
-        try:
-            with quiet(), contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # torch.jit.script's deprecation notice
-                self.export_policy_to_jit(directory, os.path.basename(jit_path))
-                self.export_policy_to_onnx(directory, os.path.basename(onnx_path))
-        finally:
-            onnx_logger.setLevel(level)
-        header = onnx.load(onnx_path, load_external_data=False)
-        side_files = {e.value for t in header.graph.initializer for e in t.external_data if e.key == "location"}
-        onnx.save_model(onnx.load(onnx_path), onnx_path)  # weights inline
-        for name in side_files:
-            side = os.path.join(directory, os.path.basename(name))
-            if os.path.isfile(side):
-                os.remove(side)
-        return jit_path, onnx_path

@@ -75,6 +75,8 @@ class TrainCfg:
     experiment_name: str = ""  # '' derives it: ORC_<orc> for oscillator tasks, else the task name
     run_name: str = ""  # '' derives it: seed<seed>
     init_at_random_ep_len: bool = True
+    logger: str = "tensorboard"  # 'tensorboard', 'wandb' or 'neptune' (rsl-rl's writers; tensorboard events always)
+    log_project_name: str = "orcgym"  # W&B / Neptune project
     check_for_nan: bool = True
     obs_groups: dict[str, tuple[str, ...]] = field(
         default_factory=lambda: {"actor": ("actor",), "critic": ("critic",)}
@@ -143,10 +145,11 @@ PROFILES: dict[str, Profile] = {
     # starting learning rate under the same adaptive-KL schedule, GAE lambda 0.95, less entropy, and
     # commands concentrated on forward walking (v_x from {0, 1, 2} m/s + N(0, 0.3^2)).
     "cpu_fast": Profile(
-        "fast wall-clock learning on a 2-core CPU: 1024 envs x 24 steps, [128, 128, 64] networks, lr 1e-3 "
-        "adaptive, lambda 0.95, forward-walking commands",
+        "fast wall-clock learning on a 2-core CPU: 1024 envs x 24 steps, 300 iterations, [128, 128, 64] networks, "
+        "lr 1e-3 adaptive, lambda 0.95, forward-walking commands",
         (
             "env.num_envs=1024",
+            "train.max_iterations=300",  # the shipped policies walk after 250-350 (about 10 min on 2 cores)
             "commands.lin_vel_x_choices=[0.0, 1.0, 2.0]",
             "commands.lin_vel_x_noise=0.3",
             "commands.lin_vel_y=[-0.3, 0.3]",
@@ -238,10 +241,46 @@ def to_rsl_rl_dict(cfg: TrainCfg) -> dict:
         "algorithm": resolve(data["algorithm"]),
         "actor": resolve(data["actor"]),
         "critic": resolve(data["critic"]),
-        "logger": "tensorboard",
+        "logger": logger_cfg(cfg),
         "experiment_name": data["experiment_name"],
         "run_name": data["run_name"],
     }
+
+
+# --- loggers ----------------------------------------------------------------------------------
+
+# --logger name -> (the package it needs, rsl-rl's writer class, environment variables the writer reads)
+LOGGERS: dict[str, tuple[str, str, tuple[str, ...]] | None] = {
+    "tensorboard": None,
+    "wandb": ("wandb", "WandbLogWriter", ()),
+    "neptune": ("neptune", "NeptuneLogWriter", ("NEPTUNE_API_TOKEN", "NEPTUNE_USERNAME")),
+}
+
+
+def logger_cfg(cfg: TrainCfg) -> str | dict:
+    """rsl-rl's `logger` entry: 'tensorboard', or the writer class with its project."""
+    if cfg.logger not in LOGGERS:
+        raise ConfigError(f"logger {cfg.logger!r} is unknown; choose one of {', '.join(LOGGERS)}")
+    spec = LOGGERS[cfg.logger]
+    return "tensorboard" if spec is None else {"class_name": spec[1], "project_name": cfg.log_project_name}
+
+
+def check_logger_ready(cfg: TrainCfg, environ: dict | None = None) -> None:
+    """Fail before anything is written when the chosen logger's package or credentials are missing."""
+    import importlib.util
+    import os
+
+    logger_cfg(cfg)
+    spec = LOGGERS[cfg.logger]
+    if spec is None:
+        return
+    package, _, variables = spec
+    if importlib.util.find_spec(package) is None:
+        raise ConfigError(f"--logger {cfg.logger} needs the {package} package: pip install -e \".[{cfg.logger}]\"")
+    environ = os.environ if environ is None else environ
+    missing = [v for v in variables if not environ.get(v)]
+    if missing:
+        raise ConfigError(f"--logger {cfg.logger} needs {' and '.join(missing)} in the environment")
 
 
 def derived_experiment_name(task: str, env_cfg: Any) -> str:

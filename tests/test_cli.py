@@ -102,7 +102,7 @@ def test_same_seed_same_weights_other_seed_other_weights(trained, tmp_path):
 
 
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")
-def test_play_exports_torchscript_and_onnx_that_agree(trained, capsys):
+def test_play_exports_torchscript_onnx_and_controller_that_agree(trained, capsys):
     import onnxruntime
 
     root, run = trained
@@ -111,7 +111,7 @@ def test_play_exports_torchscript_and_onnx_that_agree(trained, capsys):
     out = capsys.readouterr().out
     assert "mean forward velocity" in out
     jit_path, onnx_path = (os.path.join(run, "exported", f) for f in ("policy.pt", "policy.onnx"))
-    assert sorted(os.listdir(os.path.join(run, "exported"))) == ["policy.onnx", "policy.pt"]
+    assert sorted(os.listdir(os.path.join(run, "exported"))) == ["controller.onnx", "policy.onnx", "policy.pt"]
 
     session = play.Session(play.build_parser().parse_args(["--load_run", run, "--num_envs", "2", "--log_root",
                                                              str(root)]))

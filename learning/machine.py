@@ -1,0 +1,86 @@
+"""Training defaults that fit the machine, and what a run should expect to take.
+
+Without --device, --profile and --sim a run picks: CUDA when torch sees a device, else the CPU; the
+paper's settings on CUDA and the CPU recipe `cpu_fast` on the CPU; MuJoCo Warp physics on CUDA when
+the `gpu` extra is installed, else MuJoCo's CPU batch. A resumed run keeps its own profile and
+physics. `choose_defaults` is pure (the caller says whether CUDA and Warp are there), so it is
+tested without either.
+"""
+
+from __future__ import annotations
+
+import datetime
+import importlib.util
+from dataclasses import dataclass
+
+# Env steps per second of cpu_fast training, learning included, on the 2-core development machine:
+# the seven shipped policies (resources/policies/manifest.csv), 1850 iterations x 24576 steps in
+# 3542 s, 11.8k to 14.2k per run.
+CPU_FAST_STEPS_PER_S = 12_800
+CPU_REFERENCE = "the 2-core development machine's cpu_fast rate, 12.8k env steps/s"
+CPU_PROFILE, GPU_PROFILE = "cpu_fast", "paper"
+
+
+@dataclass(frozen=True)
+class RunDefaults:
+    device: str  # 'cpu' or 'cuda'
+    profile: str | None  # None: no profile (a resumed run keeps its own)
+    sim: str | None  # None: the config's (a resumed run's own)
+    reasons: tuple[str, ...]  # why each open choice went the way it did
+    alternative: str  # the flags that pick the other setting
+
+    def describe(self, physics: str) -> str:
+        """The run's first line: the settings, why, and the flag for the other choice."""
+        text = f"settings: device {self.device}, profile {self.profile or 'as the run had it'}, physics {physics}"
+        if not self.reasons:
+            return f"{text} (as given)"
+        return f"{text} ({'; '.join(self.reasons)}); {self.alternative}"
+
+
+def warp_installed() -> bool:
+    return all(importlib.util.find_spec(name) is not None for name in ("warp", "mujoco_warp"))
+
+
+def choose_defaults(device: str | None, profile: str | None, sim: str | None, *, cuda_available: bool,
+                    warp_available: bool, resume: bool = False) -> RunDefaults:
+    """Fill in what the command line left open; the flags given always win."""
+    reasons = []
+    if device is None:
+        device = "cuda" if cuda_available else "cpu"
+        reasons.append("torch sees a CUDA device" if cuda_available else "torch sees no CUDA device")
+    if profile is None and not resume:
+        profile = GPU_PROFILE if device == "cuda" else CPU_PROFILE
+        reasons.append("cpu_fast is the CPU recipe" if profile == CPU_PROFILE else "the paper's settings suit a GPU")
+    if sim is None and not resume and device == "cuda":
+        sim = "warp" if warp_available else "mujoco"
+        reasons.append("MuJoCo Warp is installed" if warp_available
+                       else "MuJoCo Warp is not installed: pip install -e \".[gpu]\" keeps physics on the GPU")
+    if resume and profile is None:
+        reasons.append("a resumed run keeps its own profile and physics")
+    if resume:
+        alternative = "--device cpu or cuda picks the device"
+    elif device == "cuda":
+        alternative = "--device cpu for the CPU recipe (profile cpu_fast)"
+    else:
+        alternative = "--profile paper for the paper's settings (4096 robots x 32 steps, 2000 iterations)"
+    return RunDefaults(device, profile, sim, tuple(reasons), alternative)
+
+
+def expected_duration(device: str, sim: str, num_envs: int, steps_per_env: int, iterations: int,
+                      world_size: int = 1) -> str:
+    """One line: the expected wall time of `iterations` PPO iterations, and what the estimate rests on."""
+    steps = iterations * num_envs * steps_per_env
+    if device == "cpu" and sim == "mujoco":
+        seconds = steps / CPU_FAST_STEPS_PER_S
+        return (f"expected duration: about {_human(seconds)} for {iterations} iterations x {num_envs * steps_per_env:,} "
+                f"env steps, at {CPU_REFERENCE} (more cores are faster); the progress lines give this machine's ETA")
+    return (f"expected duration: no measured rate for {device} with {sim} physics ({iterations} iterations x "
+            f"{num_envs * steps_per_env * world_size:,} env steps); the progress lines give the ETA from the first iteration")
+
+
+def _human(seconds: float) -> str:
+    if seconds < 90:
+        return f"{max(1, round(seconds))} s"
+    if seconds < 90 * 60:
+        return f"{round(seconds / 60)} min"
+    return f"{seconds / 3600:.1f} h ({datetime.timedelta(seconds=round(seconds / 60) * 60)})"

@@ -1,0 +1,69 @@
+"""Defaults that fit the machine: the choice is pure, so CUDA and Warp are passed in, not needed."""
+
+from __future__ import annotations
+
+import os
+import re
+
+import pytest
+
+import train
+from learning.machine import CPU_FAST_STEPS_PER_S, choose_defaults, expected_duration
+from learning.runner_config import PROFILES
+
+
+def test_a_cpu_only_machine_gets_the_cpu_recipe_and_is_told_how_to_get_the_paper():
+    d = choose_defaults(None, None, None, cuda_available=False, warp_available=True)
+    assert (d.device, d.profile, d.sim) == ("cpu", "cpu_fast", None)
+    line = d.describe("mujoco")
+    assert "device cpu, profile cpu_fast, physics mujoco" in line and "no CUDA device" in line
+    assert "--profile paper" in line
+
+
+@pytest.mark.parametrize("warp, sim", [(True, "warp"), (False, "mujoco")])
+def test_a_cuda_machine_gets_the_papers_settings_and_warp_when_installed(warp, sim):
+    d = choose_defaults(None, None, None, cuda_available=True, warp_available=warp)
+    assert (d.device, d.profile, d.sim) == ("cuda", "paper", sim)
+    line = d.describe(sim)
+    assert "--device cpu" in line and "a CUDA device" in line
+    assert ("gpu" in line) != warp  # the missing extra is named only when it is missing
+
+
+def test_flags_given_always_win():
+    d = choose_defaults("cpu", "paper", "warp", cuda_available=True, warp_available=True)
+    assert (d.device, d.profile, d.sim) == ("cpu", "paper", "warp") and d.describe("warp").endswith("(as given)")
+    d = choose_defaults("cpu", None, None, cuda_available=True, warp_available=True)
+    assert (d.profile, d.sim) == ("cpu_fast", None)  # the profile follows the device asked for
+    d = choose_defaults("cuda", "cpu_fast", None, cuda_available=True, warp_available=True)
+    assert (d.profile, d.sim) == ("cpu_fast", "warp")
+
+
+def test_a_resumed_run_keeps_its_profile_and_physics():
+    d = choose_defaults(None, None, None, cuda_available=True, warp_available=True, resume=True)
+    assert (d.device, d.profile, d.sim) == ("cuda", None, None)
+    assert "keeps its own profile" in d.describe("mujoco")
+
+
+def test_expected_duration_rests_on_the_measured_cpu_rate():
+    fast = dict(o.split("=") for o in PROFILES["cpu_fast"].overrides)
+    iterations, envs, steps = int(fast["train.max_iterations"]), int(fast["env.num_envs"]), int(
+        fast["train.num_steps_per_env"])
+    line = expected_duration("cpu", "mujoco", envs, steps, iterations)
+    minutes = iterations * envs * steps / CPU_FAST_STEPS_PER_S / 60
+    assert 5 < minutes < 20 and f"about {round(minutes)} min" in line and "12.8k env steps/s" in line
+    assert re.search(r"about [4-9]\.\d h", expected_duration("cpu", "mujoco", 4096, 32, 2000))  # the paper on a CPU
+    assert "no measured rate for cuda" in expected_duration("cuda", "warp", 4096, 32, 2000)
+
+
+def test_a_run_says_what_it_chose_why_and_how_long_it_takes(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(train, "_cuda_available", lambda: False)
+    code = train.main(["--task", "mini_cheetah_osc", "--log_root", str(tmp_path), "--num_envs", "16",
+                       "--num_threads", "1", "--max_iterations", "1", "--set", "train.num_steps_per_env=4"])
+    assert code == 0
+    first = capsys.readouterr().out.splitlines()[:2]
+    assert first[0].startswith("settings: device cpu, profile cpu_fast, physics mujoco (torch sees no CUDA device; cpu_fast is")
+    assert first[1].startswith("expected duration: about 1 s for 1 iterations x 64 env steps")
+    (experiment,) = os.listdir(tmp_path)
+    (run,) = os.listdir(tmp_path / experiment)
+    saved = (tmp_path / experiment / run / "train.yaml").read_text()
+    assert "profile: cpu_fast" in saved and "[128, 128, 64]" in saved  # the recipe's networks, the explicit flags on top
