@@ -7,11 +7,11 @@ at a fixed forward command, and the measurement window follows a warm-up.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.gait import CHECKPOINT_INTERVAL, TRANSITION, rpd_timeseries
+from analysis.gait import CHECKPOINT_INTERVAL, TRANSITION, agreement, rpd_timeseries
 from analysis.rollout import EvalSettings, eval_env_cfg, rollout
 
 
@@ -22,6 +22,9 @@ class LocomotionCheck:
     falls: int  # robots that fell at least once in the window
     gaits: dict[str, float]  # share of robots per contact-based gait label at the last 5 s checkpoint
     num_envs: int
+    oscillator_gaits: dict[str, float] = field(default_factory=dict)  # the same from the oscillator phases
+    agreement: float = float("nan")  # share of robots whose two labels agree
+    identical: bool = False  # every robot moved alike (a policy blind to its phases)
 
     @property
     def regular_share(self) -> float:
@@ -29,9 +32,17 @@ class LocomotionCheck:
         return sum(share for g, share in self.gaits.items() if g != TRANSITION)
 
     def summary(self) -> str:
-        gaits = ", ".join(f"{g} {share:.0%}" for g, share in self.gaits.items())
         return (f"tracking error {self.tracking_error:.3f} m/s (mean v_x {self.mean_velocity:.3f}) | "
-                f"falls {self.falls}/{self.num_envs} | gaits: {gaits}")
+                f"falls {self.falls}/{self.num_envs} | gaits (contacts): {mix_text(self.gaits, self.identical)} | "
+                f"(oscillators): {mix_text(self.oscillator_gaits)}, agreement {self.agreement:.0%}")
+
+
+def mix_text(shares: dict[str, float], identical: bool = False) -> str:
+    """'pronk 56%, transition 44%', or 'all robots alike: pronk' when the robots are one sample repeated."""
+    if identical:
+        return "all robots alike: " + ", ".join(g for g, p in shares.items() if p > 0)
+    items = sorted(((p, g) for g, p in shares.items() if p > 0), reverse=True)
+    return ", ".join(f"{g} {p:.0%}" for p, g in items) or "-"
 
 
 def check_locomotion(policy, env_cfg, command: float = 1.0, warmup_s: float = 2.0, measure_s: float = 10.0,
@@ -41,14 +52,22 @@ def check_locomotion(policy, env_cfg, command: float = 1.0, warmup_s: float = 2.
     cfg = eval_env_cfg(env_cfg, EvalSettings(), num_envs=num_envs, seed=seed, num_threads=num_threads)
     dt = 1.0 / cfg.control.frequency_hz
     warmup, steps = round(warmup_s / dt), round((warmup_s + measure_s) / dt)
-    result = rollout(policy, cfg, steps, command=(command, 0.0, 0.0), record=("grf", "base_lin_vel", "terminated"),
-                     record_from=warmup, progress=False)
+    result = rollout(policy, cfg, steps, command=(command, 0.0, 0.0),
+                     record=("grf", "phase", "base_lin_vel", "terminated"), record_from=warmup, progress=False)
     vx = result.data["base_lin_vel"][..., 0]
     labels = rpd_timeseries(result.data["grf"], dt=dt).labels[:, -1]
+    by_phase = rpd_timeseries(result.data["phase"], dt=dt, method="phase").labels[:, -1]
     return LocomotionCheck(
         tracking_error=float(np.mean(np.abs(vx.mean(axis=1) - command))),
         mean_velocity=float(vx.mean()),
         falls=int(result.data["terminated"].any(axis=1).sum()),
-        gaits={str(g): float(np.mean(labels == g)) for g in sorted(set(labels))},
+        gaits=_shares(labels),
         num_envs=num_envs,
+        oscillator_gaits=_shares(by_phase),
+        agreement=float(agreement(labels, by_phase)),
+        identical=bool(num_envs > 1 and np.ptp(result.data["grf"], axis=0).max() < 1e-6),
     )
+
+
+def _shares(labels) -> dict[str, float]:
+    return {str(g): float(np.mean(labels == g)) for g in sorted(set(labels))}

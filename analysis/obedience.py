@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import gait
+from analysis.locomotion import mix_text
 from analysis.plotting import COLUMN_WIDTH, GAIT_COLORS, paper_style, save_figure, sort_configs
 from analysis.rollout import EvalSettings, Job, PolicyRun, cli_main, run_jobs
 
@@ -88,13 +89,8 @@ class Obedience:
         if self.settling is not None:
             st = self.settling
             text += (f" | sigma=1: regular at 10 s {100 * st.regular_at_10s:.0f}%, final "
-                     f"{_mix_text(st.mix[-1])}, median settle {st.median_settle_s:g} s, falls {st.falls}")
+                     f"{mix_text(st.mix[-1], st.identical)}, median settle {st.median_settle_s:g} s, falls {st.falls}")
         return text
-
-
-def _mix_text(mix: dict[str, float]) -> str:
-    items = sorted(((p, g) for g, p in mix.items() if p > 0), reverse=True)
-    return ", ".join(f"{g} {100 * p:.0f}%" for p, g in items) or "-"
 
 
 def _identical(rollout) -> bool:

@@ -1,12 +1,19 @@
 """Copy finished sweep runs into resources/policies/ and write their manifest with measured metrics.
 
     python tools/ship_policies.py --runs logs/sweep --machine "2-core CPU (dev machine)"
+    python tools/ship_policies.py --remeasure          # measure the shipped policies again, keep provenance
 
 For each ORC_<xyz>/seed<k> run of the sweep (the first seed found per configuration unless
---seed is given): env.yaml, train.yaml and the newest checkpoint go to resources/policies/ORC_<xyz>/;
-the policy is then checked at 1 m/s on 16 robots with random oscillator phases, over 20 s after a 2 s start
-(analysis.locomotion), and resources/policies/manifest.csv records configuration, command, commit,
-seed, iterations, wall time, the machine that trained it and the measured metrics.
+--seed is given): env.yaml, train.yaml and the newest checkpoint go to resources/policies/ORC_<xyz>/.
+Each shipped policy is then measured at 1 m/s in the evaluation setting:
+  - walking: 16 robots with random oscillator phases, 20 s after a 2 s start (analysis.locomotion):
+    tracking error, falls, and the gait mix at the end both from foot contacts and from the
+    oscillator phases, with their agreement;
+  - obedience: sigma = 0, oscillators started in trot / pace / bound / pronk, 16 robots each, share
+    walking that gait at 10 s; sigma = 1 from random phases, 16 robots, share in a regular gait at
+    10 s (analysis.obedience).
+resources/policies/manifest.csv records configuration, command, commit, seed, iterations, wall time,
+the machine that trained it and the measured metrics.
 """
 
 from __future__ import annotations
@@ -20,23 +27,41 @@ import sys
 
 import yaml
 
-from analysis.locomotion import check_locomotion
+from analysis import obedience
+from analysis.locomotion import check_locomotion, mix_text
+from analysis.rollout import load_policy_run
 from gym_envs.orc import PAPER_CONFIGURATIONS
 from learning import runs
 
-FIELDS = ("orc", "command_mps", "commit", "seed", "iterations", "wall_time_s", "machine", "profile",
-          "tracking_error_mps", "mean_velocity_mps", "falls", "robots", "gaits")
+PROVENANCE = ("orc", "command_mps", "commit", "seed", "iterations", "wall_time_s", "machine", "profile")
+METRICS = ("tracking_error_mps", "mean_velocity_mps", "falls", "robots", "gaits_contacts", "gaits_oscillators",
+           "gait_label_agreement", "robots_alike", *(f"obeys_{g}" for g in obedience.STARTED_GAITS),
+           "sigma1_regular_at_10s")
+FIELDS = PROVENANCE + METRICS
+ROBOTS = 16
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", required=True, help="a sweep folder (ORC_<xyz>/seed<k>/ runs)")
-    parser.add_argument("--out", default=runs.POLICY_ROOT)
-    parser.add_argument("--seed", type=int, default=None)
-    parser.add_argument("--machine", required=True, help="what trained the runs, for the manifest")
-    parser.add_argument("--commit", default=None, help="the commit that trained the runs (default: HEAD)")
-    parser.add_argument("--num_threads", type=int, default=2)
-    args = parser.parse_args(argv)
+def measure(policy_dir: str, num_threads: int) -> dict:
+    """The manifest's metric columns for one shipped policy folder."""
+    run = load_policy_run(policy_dir)
+    check = check_locomotion(run.policy, run.env_cfg, command=1.0, warmup_s=2.0, measure_s=20.0, num_envs=ROBOTS,
+                             num_threads=num_threads)
+    (obeyed,) = obedience.measure([run], robots=ROBOTS, settle_robots=ROBOTS, settle_duration_s=10.0,
+                                  num_threads=num_threads, progress=False)
+    print(f"ORC {run.orc} ({policy_dir}): {check.summary()}\n    {obeyed.summary()}", flush=True)
+    return {
+        "tracking_error_mps": round(check.tracking_error, 3), "mean_velocity_mps": round(check.mean_velocity, 3),
+        "falls": check.falls, "robots": check.num_envs,
+        "gaits_contacts": mix_text(check.gaits, check.identical),
+        "gaits_oscillators": mix_text(check.oscillator_gaits),
+        "gait_label_agreement": round(check.agreement, 3),
+        "robots_alike": int(check.identical),
+        **{f"obeys_{g}": round(s.obeyed, 3) for g, s in obeyed.started.items()},
+        "sigma1_regular_at_10s": round(obeyed.settling.regular_at_10s, 3),
+    }
+
+
+def ship(args) -> list[dict]:
     commit = args.commit or subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                                            text=True).stdout.strip()
     rows = []
@@ -57,18 +82,39 @@ def main(argv: list[str] | None = None) -> int:
         for name in (runs.ENV_YAML, runs.TRAIN_YAML, os.path.basename(runs.checkpoint_path(run_dir, iteration))):
             shutil.copy2(os.path.join(run_dir, name), os.path.join(target, name))
         loaded = runs.load_policy(target)
-        check = check_locomotion(loaded.policy, loaded.env_cfg, command=1.0, warmup_s=2.0, measure_s=20.0,
-                                 num_envs=16, num_threads=args.num_threads)
-        print(f"ORC {orc} ({run_dir}, iteration {iteration}): {check.summary()}", flush=True)
         with open(os.path.join(run_dir, "sweep_status.yaml")) as f:
             status = yaml.safe_load(f)
         rows.append({
             "orc": orc, "command_mps": 1.0, "commit": commit, "seed": loaded.train_cfg.seed, "iterations": iteration,
             "wall_time_s": status.get("wall_time_s", ""), "machine": args.machine, "profile": loaded.train_cfg.profile,
-            "tracking_error_mps": round(check.tracking_error, 3), "mean_velocity_mps": round(check.mean_velocity, 3),
-            "falls": check.falls, "robots": check.num_envs,
-            "gaits": "; ".join(f"{g} {share:.2f}" for g, share in check.gaits.items()),
+            **measure(target, args.num_threads),
         })
+    return rows
+
+
+def remeasure(args) -> list[dict]:
+    with open(os.path.join(args.out, "manifest.csv"), newline="") as f:
+        old = list(csv.DictReader(f))
+    return [{**{k: row[k] for k in PROVENANCE}, **measure(os.path.join(args.out, f"ORC_{row['orc']}"),
+                                                          args.num_threads)} for row in old]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", help="a sweep folder (ORC_<xyz>/seed<k>/ runs) to ship")
+    parser.add_argument("--remeasure", action="store_true",
+                        help="measure the policies already in --out again; provenance columns are kept")
+    parser.add_argument("--out", default=runs.POLICY_ROOT)
+    parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument("--machine", help="what trained the runs, for the manifest (needed with --runs)")
+    parser.add_argument("--commit", default=None, help="the commit that trained the runs (default: HEAD)")
+    parser.add_argument("--num_threads", type=int, default=2)
+    args = parser.parse_args(argv)
+    if bool(args.runs) == args.remeasure:
+        parser.error("give either --runs DIR (with --machine) or --remeasure")
+    if args.runs and not args.machine:
+        parser.error("--runs needs --machine (what trained the runs)")
+    rows = remeasure(args) if args.remeasure else ship(args)
     with open(os.path.join(args.out, "manifest.csv"), "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=FIELDS)
         writer.writeheader()
