@@ -68,6 +68,7 @@ class CoupledSettling:
     regular_at_10s: float  # share of robots in a regular gait at the 10 s checkpoint
     median_settle_s: float  # median over robots of the settling time (inf: more than half never settle)
     velocity_error: float  # mean |v_x - command| over the last VELOCITY_WINDOW_S [m/s]
+    leg_shares: list[float]  # each leg's share of the total GRF (RF, LF, RH, LH), mean over robots
     falls: int
     identical: bool
 
@@ -89,7 +90,8 @@ class Obedience:
         if self.settling is not None:
             st = self.settling
             text += (f" | sigma=1: regular at 10 s {100 * st.regular_at_10s:.0f}%, final "
-                     f"{mix_text(st.mix[-1], st.identical)}, median settle {st.median_settle_s:g} s, falls {st.falls}")
+                     f"{mix_text(st.mix[-1], st.identical)}, median settle {st.median_settle_s:g} s, falls {st.falls}, "
+                     f"GRF shares {'/'.join(f'{x:.2f}' for x in st.leg_shares)}")
         return text
 
 
@@ -140,6 +142,7 @@ def coupled_settling_result(rollout) -> CoupledSettling:
     labels = contact.labels
     at_10 = np.flatnonzero(np.isclose(contact.times, 10.0))
     regular = labels != gait.TRANSITION
+    per_leg = rollout.data["grf"].mean(axis=1)  # (N, 4)
     return CoupledSettling(
         robots=len(labels),
         times=[float(t) for t in contact.times],
@@ -147,6 +150,7 @@ def coupled_settling_result(rollout) -> CoupledSettling:
         regular_at_10s=float(regular[:, at_10[0]].mean()) if at_10.size else float("nan"),
         median_settle_s=float(np.median(settle_times(contact.times, labels))),
         velocity_error=float(np.mean(np.abs(_forward_velocity(rollout) - COMMAND))),
+        leg_shares=[float(x) for x in np.mean(per_leg / per_leg.sum(axis=1, keepdims=True), axis=0)],
         falls=int(rollout.fell().sum()),
         identical=_identical(rollout),
     )

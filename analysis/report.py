@@ -306,10 +306,11 @@ def _section_obedience(ob: dict) -> list[str]:
                      " / ".join(f"{100 * x.stance_share:.0f} %" for x in started),
                      f"{100 * np.mean([x.phase_agreement for x in started]):.0f} %",
                      f"{100 * st.regular_at_10s:.0f} %", _shares(st.mix[-1]), _fmt(st.median_settle_s, 0, " s"),
-                     sum(x.falls for x in started) + st.falls])
+                     " / ".join(f"{x:.2f}" for x in st.leg_shares), sum(x.falls for x in started) + st.falls])
     md += [markdown_table(["ORC", "policy", "walks started trot / pace / bound / pronk (v [m/s])",
                            "GRF in stance half", "contact/oscillator agreement", "σ = 1: regular at 10 s",
-                           "σ = 1: final gaits", "σ = 1: median settle", "falls"], rows), ""]
+                           "σ = 1: final gaits", "σ = 1: median settle", "σ = 1: GRF share " + "/".join(LEG_NAMES),
+                           "falls"], rows), ""]
     return md
 
 
