@@ -71,7 +71,7 @@ def _scalars(run_dir, tag):
 def test_resume_continues_the_iteration_count_in_a_new_run(trained, tmp_path, capsys):
     root, run = trained
     before = snapshot(root)
-    assert train.main(["--resume", "--load_run", run, "--log_root", str(tmp_path), "--max_iterations", "4",
+    assert train.main(["--resume", "--load_run", run, "--log_root", str(tmp_path), "--max_iterations", "2",
                        "--num_threads", "1"]) == 0
     assert re.search(r"\bit 3/4 ", capsys.readouterr().out)
     assert snapshot(root) == before  # the resumed run is left alone
@@ -142,7 +142,7 @@ def test_play_evaluation_settings(trained):
 
 def _assert_one_line_error(capsys, code, pattern):
     err = capsys.readouterr().err.strip()
-    assert code == 1
+    assert code in (1, 2)  # 2: a malformed flag, caught by the parser
     assert "\n" not in err, err
     assert re.search(pattern, err), err
 
@@ -151,7 +151,7 @@ def _assert_one_line_error(capsys, code, pattern):
     "argv, pattern",
     [
         (["--task", "nope"], r"^train\.py: error: unknown task 'nope'"),
-        (["--task", "mini_cheetah_osc", "--orc", "12"], r"malformed ORC string '12'"),
+        (["--task", "mini_cheetah_osc", "--orc", "12"], r"argument --orc: '12' is not an ORC string"),
         (["--task", "mini_cheetah_osc", "--set", "env.num_env=3"], r"did you mean 'env.num_envs'"),
         (["--task", "mini_cheetah_osc", "--set", "train.algorithm.lr=3"], r"unknown config key 'algorithm.lr'"),
         (["--task", "mini_cheetah_osc", "--set", "algorithm.gamma=0.9"], r"prefix it with 'train.'"),
