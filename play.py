@@ -97,6 +97,8 @@ def locate_run(args, log_root: str) -> tuple[str, str]:
     from learning import runs
 
     if args.shipped:
+        if args.load_run:
+            raise ConfigError("--shipped and --load_run both choose the policy; pass one of them")
         orc = args.orc or "111"
         shipped = runs.shipped_policy_dir(orc)
         if not (runs.is_run_dir(shipped) and runs.list_checkpoints(shipped)):

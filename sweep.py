@@ -154,7 +154,14 @@ def main(argv: list[str] | None = None) -> int:
     return cli.run(build_parser(), _main, argv)
 
 
+# Keys each run of the sweep sets itself (from --orcs, --seeds and its folder layout).
+SWEEP_KEYS = ("osc.orc", "train.seed", "train.experiment_name", "train.run_name")
+
+
 def _main(args) -> int:
+    for item in args.overrides:
+        if item.partition("=")[0].strip() in SWEEP_KEYS:
+            raise ConfigError(f"--set {item}: the sweep sets {', '.join(SWEEP_KEYS)} for each run (--orcs, --seeds)")
     # Every run's configs are checked before the first folder is made.
     for orc in args.orcs:
         for seed in args.seeds:

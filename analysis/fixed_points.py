@@ -114,12 +114,19 @@ def _plot(phase, values, fps):
     return fig
 
 
-def main(argv=None) -> int:
+def build_parser():
     from learning import cli
 
     parser = cli.Parser("analysis.fixed_points", __doc__)
     parser.add_argument("--out", type=cli.folder, default="results/fixed_points", help="output directory")
     parser.add_argument("--quick", action="store_true", help="coarse grid, low-resolution PNG")
+    return parser
+
+
+def main(argv=None) -> int:
+    from learning import cli
+
+    parser = build_parser()
 
     def body(args) -> int:
         result = run(args.out, quick=args.quick)

@@ -24,7 +24,7 @@ from analysis.plotting import LEG_NAMES, sort_configs
 from analysis.rollout import (
     DEFAULT_TASK,
     EvalSettings,
-    add_cli_args,
+    build_parser,
     eval_overrides,
     group_by_orc,
     runs_from_args,
@@ -311,8 +311,7 @@ def _section_fixed_points(fp: dict) -> list[str]:
 def main(argv=None) -> int:
     from learning import cli
 
-    parser = cli.Parser("analysis.report", __doc__)
-    add_cli_args(parser, out_default="report")
+    parser = build_parser("analysis.report", __doc__, out_default="report")
 
     def body(args) -> int:
         policies = runs_from_args(args)

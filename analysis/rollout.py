@@ -434,9 +434,11 @@ def _stack_pushes(jobs: Sequence[Job]):
 # --- command line shared by the analysis modules ---------------------------------------------------
 
 
-def add_cli_args(parser, out_default: str | None = None) -> None:
+def build_parser(prog: str, description: str, out_default: str | None = None):
+    """The flags every analysis module takes (learning.cli's style and checks)."""
     from learning import cli
 
+    parser = cli.Parser(prog, description)
     parser.add_argument("--runs", type=cli.folder, default=None,
                         help="folder of training runs (a sweep's output); default: the shipped policies")
     parser.add_argument("--out", type=cli.folder, required=out_default is None, default=out_default,
@@ -447,6 +449,7 @@ def add_cli_args(parser, out_default: str | None = None) -> None:
     parser.add_argument("--process_noise", type=cli.number(0.0), default=0.0,
                         help="oscillator process noise [Hz] at evaluation (released scripts: 0.25)")
     parser.add_argument("--seed", type=cli.integer(0), default=0)
+    return parser
 
 
 QUICK_MAX_PER_CONFIG = 2  # --quick without --max_per_config uses this many runs of each configuration
@@ -464,8 +467,7 @@ def cli_main(prog: str, description: str, run_fn, argv=None) -> int:
     """
     from learning import cli
 
-    parser = cli.Parser(prog, description)
-    add_cli_args(parser)
+    parser = build_parser(prog, description)
 
     def body(args) -> int:
         runs = runs_from_args(args)

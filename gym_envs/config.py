@@ -520,7 +520,10 @@ class Check:
 
 
 def _lookup(data: Any, key: str) -> Any:
+    """The value at a dotted key; None when a section on the way is None (an optional section left out)."""
     for part in key.split("."):
+        if data is None:
+            return None
         data = data[part]
     return data
 
@@ -553,6 +556,8 @@ def check_values(cfg: Any, rules: Mapping[str, Any], prefix: str = "") -> None:
         raise ConfigError(f"config key '{prefix}{found[0]}' is {found[1]}; allowed: a finite number")
     for key, rule in rules.items():
         value = _lookup(data, key)
+        if value is None:
+            continue
         # A rule on a dict applies to each of its values, so the message names the entry.
         entries = [(_join(key, k), v) for k, v in value.items()] if isinstance(value, Mapping) else [(key, value)]
         for name, entry in entries:

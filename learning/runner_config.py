@@ -78,6 +78,9 @@ def _model_rules(name: str) -> dict:
         f"{name}.class_name": OneOf(("MLPModel",)),
         f"{name}.hidden_dims": (Check(len, "at least one hidden layer"), Range(1)),
         f"{name}.activation": OneOf(_ACTIVATIONS),
+        f"{name}.distribution_cfg.class_name": OneOf(("GaussianDistribution",)),
+        f"{name}.distribution_cfg.init_std": _POSITIVE,
+        f"{name}.distribution_cfg.std_type": OneOf(("scalar", "log")),
     }
 
 
@@ -94,7 +97,8 @@ class TrainCfg:
         "save_interval": Range(1),
         "experiment_name": Check(_folder_name, "a plain folder name (no path separator)"),
         "run_name": Check(_folder_name, "a plain folder name (no path separator)"),
-        "obs_groups": Check(len, "at least one observation group"),
+        "obs_groups": Check(lambda groups: groups and set(groups) <= {"actor", "critic"},
+                            "a non-empty list of the env's observation groups, actor and critic"),
         "algorithm.class_name": OneOf(("PPO",)),
         "algorithm.num_learning_epochs": Range(1),
         "algorithm.num_mini_batches": Range(1),
@@ -135,11 +139,8 @@ class TrainCfg:
         """One-line ConfigError (keys with the 'train.' prefix) for a value outside RULES, or a batch
         too small for its mini-batches (num_envs robots per process)."""
         check_values(self, self.RULES, prefix=TRAIN_PREFIX)
-        dist = self.actor.distribution_cfg
-        if dist is None:
+        if self.actor.distribution_cfg is None:
             raise ConfigError("config key 'train.actor.distribution_cfg' is None; the actor needs a distribution")
-        check_values(dist, {"class_name": OneOf(("GaussianDistribution",)), "init_std": _POSITIVE,
-                            "std_type": OneOf(("scalar", "log"))}, prefix=TRAIN_PREFIX + "actor.distribution_cfg.")
         batch = num_envs * self.num_steps_per_env
         if self.algorithm.num_mini_batches > batch:
             raise ConfigError(

@@ -7,6 +7,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -236,3 +237,53 @@ def test_play_video_headless(trained, tmp_path):
         pytest.skip(proc.stderr.strip())
     assert proc.returncode == 0, proc.stderr
     assert "video" in proc.stdout and video.stat().st_size > 0
+
+
+def test_a_second_ctrl_c_exits_quietly(tmp_path, capsys, monkeypatch):
+    from learning.vec_env import TaskVecEnv
+
+    step, calls = TaskVecEnv.step, []
+
+    def step_then_two_ctrl_c(self, actions):
+        calls.append(1)
+        if len(calls) == 5:  # inside the second iteration's rollout
+            signal.raise_signal(signal.SIGINT)
+            signal.raise_signal(signal.SIGINT)
+        return step(self, actions)
+
+    monkeypatch.setattr(TaskVecEnv, "step", step_then_two_ctrl_c)
+    assert run_train(tmp_path, "--max_iterations", "100", "--set", "train.num_steps_per_env=4") == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["train.py: interrupted; stopped without saving"]
+    assert runs.list_checkpoints(only_run(tmp_path)) == [0]  # the first Ctrl-C's save was aborted by the second
+
+
+def test_sigkill_during_saves_leaves_loadable_checkpoints_and_resume_cleans_up(tmp_path, capsys):
+    """Fault injection: kill -9 the moment a checkpoint is being written (every iteration saves)."""
+    cmd = [sys.executable, "train.py", "--task", "mini_cheetah_osc", "--log_root", str(tmp_path), "--seed", "4",
+           "--max_iterations", "100000", "--num_envs", "4", "--num_threads", "1", "--set", "train.num_steps_per_env=2",
+           "--set", "train.save_interval=1", "--set", "train.algorithm.num_mini_batches=1"]
+    left = []
+    for attempt in range(4):  # the kill can land just after a rename; try again until it lands inside a save
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and time.monotonic() < deadline:
+            run = os.path.join(tmp_path, "ORC_111", sorted(os.listdir(tmp_path / "ORC_111"))[-1]) \
+                if (tmp_path / "ORC_111").is_dir() and os.listdir(tmp_path / "ORC_111") else None
+            names = os.listdir(run) if run else []
+            if len(runs.list_checkpoints(run) if run else []) >= 3 and any(n.endswith(".tmp") for n in names):
+                proc.kill()
+                break
+        proc.wait(timeout=30)
+        left = [n for n in os.listdir(run) if n.endswith(".tmp")]
+        if left:
+            break
+        cmd += ["--run_name", f"attempt{attempt + 1}"]
+    assert left, "no kill landed inside a save in 4 attempts"
+    checkpoints = runs.list_checkpoints(run)
+    for it in checkpoints:
+        assert runs.load_checkpoint(runs.checkpoint_path(run, it))["iter"] == it
+    assert train.main(["--resume", "--load_run", run, "--log_root", str(tmp_path / "resumed"), "--max_iterations",
+                       "1", "--num_threads", "1"]) == 0
+    assert not [n for n in os.listdir(run) if n.endswith(".tmp")]  # removed at the start of the resume
+    assert runs.list_checkpoints(only_run(tmp_path / "resumed")) == [checkpoints[-1] + 1]
