@@ -262,3 +262,9 @@ def test_the_base_command_lines_get_as_far_as_building_an_env(name, sandbox, cap
     main, _, base, _ = SCRIPTS[name]
     main(base)
     assert sandbox[1], capsys.readouterr().err
+
+
+def test_the_dashed_spelling_of_a_flag_still_works():
+    args = build_parser("analysis.report", "", out_default="report").parse_args(
+        ["--max-per-config", "3", "--process-noise=0.25"])
+    assert (args.max_per_config, args.process_noise) == (3, 0.25)

@@ -158,6 +158,10 @@ def _assert_one_line_error(capsys, code, pattern):
         (["--task", "mini_cheetah_osc", "--set", "algorithm.gamma=0.9"], r"prefix it with 'train.'"),
         (["--resume", "--load_run", "missing_run"], r"no run 'missing_run' under .* existing runs: ORC_111/"),
         (["--resume", "--checkpoint", "7"], r"has no checkpoint 7; available iterations: 0, 2"),
+        (["--resume", "--load_run", "RUN"], r"model_2.pt is at iteration 2, the run's planned total "
+                                           r"\(train.max_iterations 2\); add --max_iterations N to train N more"),
+        (["--task", "mini_cheetah_osc", "--set", "train.save_interval=0"],
+         r"config key 'train.save_interval' is 0; allowed: a number >= 1"),
         (["--resume", "--orc", "011", "--load_run", "RUN", "--max_iterations", "9"],
          r"expects 53 actor / 61 critic observations but .* gives 45 / 49; likely cause: the ORC O-bit differs"),
     ],
@@ -287,3 +291,52 @@ def test_sigkill_during_saves_leaves_loadable_checkpoints_and_resume_cleans_up(t
                        "1", "--num_threads", "1"]) == 0
     assert not [n for n in os.listdir(run) if n.endswith(".tmp")]  # removed at the start of the resume
     assert runs.list_checkpoints(only_run(tmp_path / "resumed")) == [checkpoints[-1] + 1]
+
+
+def test_play_names_the_policy_and_how_to_choose_the_shipped_one(trained, capsys):
+    root, run = trained
+    assert play.main(["--orc", "111", "--log_root", str(root), "--headless", "--num_envs", "2", "--duration", "0.05",
+                      "--num_threads", "1"]) == 0
+    out = capsys.readouterr().out
+    assert f"policy {os.path.join(run, 'model_2.pt')} (iteration 2; the newest run of ORC 111 under {root})" in out
+    assert "the shipped one: --shipped --orc 111" in out
+
+
+def test_the_shipped_policy_plays_on_request_and_exports_into_the_log_root(trained, tmp_path, capsys):
+    root, _ = trained
+    before = snapshot(runs.POLICY_ROOT)
+    assert play.main(["--shipped", "--orc", "110", "--log_root", str(tmp_path), "--headless", "--num_envs", "2",
+                      "--duration", "0.05", "--num_threads", "1", "--export"]) == 0
+    assert "(iteration 250; the shipped ORC 110 policy)" in capsys.readouterr().out
+    assert {"policy.onnx", "policy.pt"} <= set(os.listdir(tmp_path / "shipped" / "ORC_110" / "exported"))
+    assert snapshot(runs.POLICY_ROOT) == before  # resources/ untouched
+
+
+def test_a_newer_run_that_cannot_be_read_is_named_not_skipped(trained, tmp_path, capsys):
+    import shutil
+
+    _, run = trained
+    shutil.copytree(run, tmp_path / "ORC_111" / os.path.basename(run))
+    broken = tmp_path / "ORC_111" / "2999-01-01_00-00-00_seed1"
+    shutil.copytree(run, broken)
+    (broken / "env.yaml").write_text("osc: [111\n")
+    code = play.main(["--orc", "111", "--log_root", str(tmp_path), "--headless", "--num_envs", "2"])
+    _assert_one_line_error(capsys, code, rf"the newest run {broken} cannot be read \(env.yaml: .*\); fix or remove "
+                                         r"it, or choose a run with --load_run")
+
+
+def test_print_config_shows_the_resolved_configs_as_set_keys_and_writes_nothing(trained, tmp_path, capsys):
+    import yaml
+
+    assert train.main(["--task", "mini_cheetah_osc", "--profile", "cpu_fast", "--num_envs", "64", "--log_root",
+                       str(tmp_path), "--set", "train.save_interval=7", "--print_config"]) == 0
+    data = yaml.safe_load(capsys.readouterr().out)
+    assert data["env"]["num_envs"] == 64 and data["osc"]["orc"] == "111"
+    assert data["train"]["save_interval"] == 7 and float(data["train"]["algorithm"]["learning_rate"]) == 1e-3
+    assert data["train"]["actor"]["hidden_dims"] == [128, 128, 64]
+    assert not os.listdir(tmp_path)
+    root, _ = trained
+    assert play.main(["--log_root", str(root), "--command", "1.5", "--print_config"]) == 0
+    data = yaml.safe_load(capsys.readouterr().out)
+    assert data["commands"]["lin_vel_x"] == [1.5, 1.5] and data["push"]["enabled"] is False
+    assert data["train"]["num_steps_per_env"] == 8

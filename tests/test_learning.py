@@ -222,6 +222,13 @@ def test_checkpoints_are_atomic_weights_only_and_size_checked(tmp_path):
         runs.load_checkpoint(truncated)
 
 
+def test_a_save_removes_the_temporary_files_of_interrupted_saves(tmp_path):
+    stale = tmp_path / ".model_3.pt.x1y2.tmp"
+    stale.write_bytes(b"half a checkpoint")
+    small_runner(small_env(4)).save(str(tmp_path / "model_4.pt"))
+    assert os.listdir(tmp_path) == ["model_4.pt"]
+
+
 def test_a_checkpoint_with_other_hidden_sizes_is_one_line_naming_the_layer(tmp_path):
     path = str(tmp_path / "model_0.pt")
     small_runner(small_env(4)).save(path)
