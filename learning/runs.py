@@ -12,6 +12,8 @@ Layout (one folder per training run; a resumed run gets a new folder):
 
 Checkpoints are written atomically (temporary file in the same folder, then os.replace) and read
 with `torch.load(weights_only=True)`: they hold only tensors, dicts, lists, numbers and strings.
+The hidden temporary file a killed save leaves behind is removed by the next save into that
+folder, and by train.py when it resumes from the folder.
 Every failure here is a `RunError` whose message is one line saying what exists.
 """
 
