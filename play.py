@@ -49,8 +49,9 @@ _HAS_DISPLAY = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY
 if not _HAS_DISPLAY:
     os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering; must be set before mujoco is imported
 
-import argparse  # noqa: E402
 import time  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from typing import Any  # noqa: E402
 
 from gym_envs.config import ConfigError  # noqa: E402
 from gym_envs.evaluation import evaluation_overrides  # noqa: E402
@@ -118,7 +119,8 @@ def locate_run(args, log_root: str) -> tuple[str, str]:
             f"{err}; no shipped policy at {shipped} either (train one: python train.py --task "
             f"{args.task or 'mini_cheetah_osc'} --orc {args.orc})"
         ) from None
-    filters = " ".join(f for f in (f"task {args.task}" if args.task else "", f"ORC {args.orc}" if args.orc else "") if f)
+    filters = " ".join(f for f in (f"task {args.task}" if args.task else "",
+                                    f"ORC {args.orc}" if args.orc else "") if f)
     return run_dir, f"the newest run{' of ' + filters if filters else ''} under {log_root}"
 
 
@@ -150,45 +152,66 @@ def play_overrides(env_cfg, args) -> list[str]:
     return items
 
 
+@dataclass
+class Choice:
+    """The policy play.py will run and its evaluation configs, checked; nothing built yet."""
+
+    run_dir: str
+    chosen_as: str  # why this run: shown to the user
+    checkpoint: str
+    iteration: int
+    task_name: str
+    trained_env_cfg: Any  # as in the run's env.yaml
+    env_cfg: Any  # the evaluation env config
+    train_cfg: Any
+    log_root: str
+
+    @property
+    def orc(self) -> str | None:
+        return getattr(getattr(self.env_cfg, "osc", None), "orc", None)
+
+
+def choose(args) -> Choice:
+    import torch
+
+    from gym_envs.config import apply_overrides
+    from learning import runs
+
+    if any(item.strip().startswith("train.") for item in args.overrides):
+        raise ConfigError("play.py takes env overrides only; train.* keys have no effect here")
+    if args.device == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("--device cuda, but torch sees no CUDA device")
+    log_root = args.log_root or runs.default_log_root()
+    run_dir, chosen_as = locate_run(args, log_root)
+    checkpoint = runs.find_checkpoint(run_dir, args.checkpoint)
+    task, trained_env, train_cfg = runs.load_run_configs(run_dir)
+    if args.task and args.task != task:
+        raise ConfigError(f"run {run_dir} trained task {task!r}, not {args.task!r}")
+    env_cfg = apply_overrides(trained_env, play_overrides(trained_env, args) + list(args.overrides))
+    env_cfg.validate()
+    return Choice(run_dir, chosen_as, checkpoint, runs.checkpoint_iteration(checkpoint), task, trained_env, env_cfg,
+                  train_cfg, log_root)
+
+
 class Session:
     """The loaded policy and its evaluation env."""
 
-    def __init__(self, args):
-        import torch
-
+    def __init__(self, args, choice: Choice | None = None):
         from gym_envs import make_env
-        from gym_envs.config import apply_overrides
         from gym_envs.orc import parse_orc
         from learning import runs
         from learning.runner import TaskRunner
         from learning.vec_env import TaskVecEnv
 
-        if any(item.strip().startswith("train.") for item in args.overrides):
-            raise ConfigError("play.py takes env overrides only; train.* keys have no effect here")
-        if args.device == "cuda" and not torch.cuda.is_available():
-            raise ConfigError("--device cuda, but torch sees no CUDA device")
-        self.log_root = args.log_root or runs.default_log_root()
-        self.run_dir, self.chosen_as = locate_run(args, self.log_root)
-        self.checkpoint = runs.find_checkpoint(self.run_dir, args.checkpoint)
-        self.iteration = runs.checkpoint_iteration(self.checkpoint)
-        saved_task, trained_env, train_cfg = runs.load_run_configs(self.run_dir)
-        if args.task and args.task != saved_task:
-            raise ConfigError(f"run {self.run_dir} trained task {saved_task!r}, not {args.task!r}")
-        self.task_name = saved_task
-        env_cfg = apply_overrides(trained_env, play_overrides(trained_env, args) + list(args.overrides))
-        env_cfg.validate()
-        self.orc = getattr(getattr(env_cfg, "osc", None), "orc", None)
-        self.env_cfg, self.train_cfg = env_cfg, train_cfg
-        if args.print_config:
-            return
-        if self.orc is not None:
-            orc = parse_orc(self.orc)
-            if args.coupling == "on" and not orc.coupling:
-                print(f"note: ORC {self.orc} has C=0, so the coupling stays 0; pass --orc with C=1 to couple")
-        self.env = TaskVecEnv(make_env(saved_task, env_cfg), device=args.device)
-        self.runner = TaskRunner(self.env, train_cfg, log_dir=None, device=args.device)
-        self.runner.load(self.checkpoint, load_cfg={"actor": True}, context=f"task {saved_task} as configured",
-                         cause=runs.orc_mismatch_cause(trained_env, env_cfg))
+        self.choice = choice = choice or choose(args)
+        self.run_dir, self.checkpoint, self.task_name, self.orc = (choice.run_dir, choice.checkpoint,
+                                                                   choice.task_name, choice.orc)
+        if self.orc is not None and args.coupling == "on" and not parse_orc(self.orc).coupling:
+            print(f"note: ORC {self.orc} has C=0, so the coupling stays 0; pass --orc with C=1 to couple")
+        self.env = TaskVecEnv(make_env(choice.task_name, choice.env_cfg), device=args.device)
+        self.runner = TaskRunner(self.env, choice.train_cfg, log_dir=None, device=args.device)
+        self.runner.load(self.checkpoint, load_cfg={"actor": True}, context=f"task {choice.task_name} as configured",
+                         cause=runs.orc_mismatch_cause(choice.trained_env_cfg, choice.env_cfg))
         self.policy = self.runner.get_inference_policy(args.device)
 
     @property
@@ -334,20 +357,21 @@ def _main(args) -> int:
     try:
         if args.num_threads:
             torch.set_num_threads(args.num_threads)
-        session = Session(args)
+        choice = choose(args)
         if args.print_config:
-            print(cli.config_yaml(session.env_cfg, session.train_cfg), end="")
+            print(cli.config_yaml(choice.env_cfg, choice.train_cfg), end="")
             return 0
+        session = Session(args, choice)
         if args.video:
             video = VideoRecorder(session, args.video)
-        print(f"policy {session.checkpoint} (iteration {session.iteration}; {session.chosen_as}) | task "
-              f"{session.task_name}" + (f" (ORC {session.orc})" if session.orc else "")
+        print(f"policy {choice.checkpoint} (iteration {choice.iteration}; {choice.chosen_as}) | task "
+              f"{choice.task_name}" + (f" (ORC {choice.orc})" if choice.orc else "")
               + f" | {session.env.num_envs} robots")
-        if not runs.is_shipped(session.run_dir):
-            orc = session.orc or "111"
-            print(f"other policies: --load_run RUN --checkpoint N; the shipped one: --shipped --orc {orc}")
+        if not runs.is_shipped(choice.run_dir):
+            print("other policies: --load_run RUN --checkpoint N; the shipped one: --shipped --orc "
+                  f"{choice.orc or '111'}")
         if args.export:
-            jit_path, onnx_path = session.runner.export(runs.export_dir(session.run_dir, session.log_root))
+            jit_path, onnx_path = session.runner.export(runs.export_dir(choice.run_dir, choice.log_root))
             print(f"exported {jit_path} and {onnx_path}")
 
         interactive = not args.headless and _HAS_DISPLAY and video is None

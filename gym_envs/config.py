@@ -482,7 +482,8 @@ class Range:
 
     def describe(self) -> str:
         if self.low is not None and self.high is not None:
-            return f"a number in {'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}"
+            left, right = "(" if self.low_open else "[", ")" if self.high_open else "]"
+            return f"a number in {left}{self.low:g}, {self.high:g}{right}"
         if self.low is not None:
             return f"a number {'>' if self.low_open else '>='} {self.low:g}"
         return f"a number {'<' if self.high_open else '<='} {self.high:g}"

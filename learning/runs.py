@@ -143,7 +143,8 @@ def load_checkpoint(path: str, map_location: str | torch.device | None = None) -
             f"only tensors, numbers, strings, lists and dicts); use a checkpoint that orcgym wrote"
         ) from None
     except Exception as err:  # a truncated file, not a torch file
-        raise RunError(f"cannot read checkpoint {path}: {type(err).__name__}: {' '.join(str(err).split())}") from None
+        raise RunError(f"cannot read checkpoint {path}: the file is truncated or not a torch checkpoint "
+                       f"({type(err).__name__}: {' '.join(str(err).split())})") from None
     if not isinstance(data, dict) or "actor_state_dict" not in data:
         raise RunError(f"{path} is not an orcgym/rsl-rl checkpoint (no actor_state_dict)")
     return data
@@ -191,8 +192,8 @@ def check_layer_shapes(data: dict, path: str, models: dict[str, torch.nn.Module]
                 raise RunError(
                     f"checkpoint {path} does not fit {context}: {part} layer {name} is {list(a) if a else 'absent'} "
                     f"there but {list(b) if b else 'absent'} here; likely cause: other train.{part}.hidden_dims "
-                    f"(the checkpoint's: {hidden_dims(saved)}, configured: {hidden_dims(wanted)}) - use the "
-                    f"run's --profile and --set options"
+                    f"(the checkpoint's: {hidden_dims(saved)}, configured: {hidden_dims(wanted)}); the configured "
+                    f"ones come from the run's train.yaml and any --profile or --set given now"
                 )
 
 

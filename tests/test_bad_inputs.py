@@ -141,7 +141,8 @@ SCRIPTS = {
                                                  "--num_threads", "1"], PLAY_FLAGS),
     "sweep.py": (sweep.main, sweep.build_parser(), ["--orcs", "111", "--num_threads", "1", "--out", "sweep"],
                  SWEEP_FLAGS),
-    **{name: (module.main, build_parser(name, ""), ["--out", "out"], ANALYSIS_FLAGS) for name, module in ANALYSIS.items()},
+    **{name: (module.main, build_parser(name, ""), ["--out", "out"], ANALYSIS_FLAGS)
+       for name, module in ANALYSIS.items()},
     "analysis.fixed_points": (fixed_points.main, fixed_points.build_parser(), [], FIXED_POINTS_FLAGS),
 }
 

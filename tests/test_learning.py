@@ -210,8 +210,8 @@ def test_checkpoints_are_atomic_weights_only_and_size_checked(tmp_path):
         other.load(path, cause="x")
     bad = str(tmp_path / "model_1.pt")
     torch.save({"actor_state_dict": {}, "x": NotAllowed()}, bad)
-    with pytest.raises(runs.RunError, match=r"refused checkpoint .*model_1.pt: it holds tests.test_learning.NotAllowed, "
-                                            r"and loading it could run code") as refused:
+    refusal = r"refused checkpoint .*model_1.pt: it holds tests.test_learning.NotAllowed, and loading it could run code"
+    with pytest.raises(runs.RunError, match=refusal) as refused:
         runs.load_checkpoint(bad)
     assert "weights_only" not in str(refused.value)  # no advice to switch the protection off
     truncated = str(tmp_path / "model_2.pt")
