@@ -118,12 +118,12 @@ class LeggedRobot:
     def _per_joint(self, values, name: str) -> torch.Tensor:
         """Expand one value, one per joint of a leg, or one per joint, to (num_joints,)."""
         v = torch.as_tensor(values, dtype=torch.float32, device=self.device).flatten()
-        j = self.num_actions
+        j, per_leg = self.num_actions, self.num_actions // self.num_legs
         if v.numel() in (1, j):
             return v.expand(j).clone()
-        if j % v.numel() == 0:
-            return v.repeat(j // v.numel())
-        raise ConfigError(f"{name} has {v.numel()} values; give 1, one per joint of a leg, or {j}")
+        if v.numel() == per_leg:
+            return v.repeat(self.num_legs)
+        raise ConfigError(f"{name} has {v.numel()} values; give 1, one per joint of a leg ({per_leg}), or {j}")
 
     def _init_reward_terms(self) -> None:
         self.reward_weights = {k: w for k, w in self.cfg.rewards.weights.items() if w != 0.0}
