@@ -241,6 +241,8 @@ class TaskRunner(OnPolicyRunner):
         """Load a checkpoint (weights_only) after checking that its network sizes fit this task."""
         data = runs.load_checkpoint(path, map_location=map_location or self.device)
         runs.check_checkpoint_fits(data, path, *self.obs_dims, self.env.num_actions, context, cause)
+        runs.check_layer_shapes(data, path, {"actor_state_dict": self.alg.actor, "critic_state_dict": self.alg.critic},
+                                context)
         if self.alg.load(data, load_cfg, strict):
             self.current_learning_iteration = int(data.get("iter", 0))
         return data.get("infos")
