@@ -31,12 +31,17 @@ a second Ctrl-C aborts without saving. Errors in the inputs print one line and e
 before anything is written.
 
 Devices. --device cpu|cuda puts the task's tensors and the learner there; the 'mujoco' physics
-always runs on CPU threads (--num_threads, which also caps torch's CPU threads). Multi-GPU
-(rsl-rl's data-parallel PPO, one process per GPU, each with --num_envs robots):
+always runs on CPU threads (--num_threads, which also caps torch's CPU threads).
 
-    torchrun --standalone --nproc_per_node=2 train.py --task mini_cheetah_osc --device cuda --sim warp
+Several processes (data-parallel PPO: gradients, KL and observation statistics averaged over
+ranks) start under torchrun, on CPU processes (gloo) or one GPU each (NCCL, cuda:<LOCAL_RANK>):
 
-Each process uses cuda:<LOCAL_RANK> and seed + RANK; only rank 0 writes the run folder.
+    torchrun --standalone --nproc_per_node=2 train.py --task mini_cheetah_osc --num_threads 1
+    torchrun --standalone --nproc_per_node=4 train.py --task mini_cheetah_osc --device cuda --sim warp
+
+Each process simulates --num_envs robots with seed + RANK; --num_threads 0 (the default) gives
+each process its share of the cores. Only rank 0 writes the run folder and prints progress;
+Ctrl-C reaches every rank, and rank 0 saves before all exit.
 """
 
 from __future__ import annotations
@@ -79,25 +84,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _distributed() -> tuple[int, int, int]:
-    """(world size, global rank, local rank) from torchrun's environment."""
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    return world, int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
-
-
-def _resolve_device(requested: str | None, world: int, local_rank: int) -> str:
-    import torch
-
-    device = requested or ("cuda" if world > 1 else "cpu")
-    if device == "cuda":
-        if not torch.cuda.is_available():
-            raise ConfigError("--device cuda, but torch sees no CUDA device (this torch build or machine has none)")
-        return f"cuda:{local_rank}"
-    if world > 1:
-        raise ConfigError(f"torchrun started {world} processes; multi-process training needs --device cuda")
-    return "cpu"
-
-
 def seed_everything(seed: int) -> None:
     import numpy as np
     import torch
@@ -113,7 +99,7 @@ def prepare(args: argparse.Namespace):
     """Configs, env and runner, checked and built; nothing is written yet."""
     from gym_envs import env_cfg_class, make_env
     from gym_envs.orc import parse_orc
-    from learning import runs
+    from learning import distributed, runs
     from learning.runner import TaskRunner
     from learning.runner_config import (
         apply_split_overrides,
@@ -124,7 +110,9 @@ def prepare(args: argparse.Namespace):
     from learning.vec_env import TaskVecEnv
 
     log_root = args.log_root or runs.default_log_root()
-    world, rank, local_rank = _distributed()
+    ranks = distributed.ranks_from_env()
+    device = distributed.resolve_device(args.device, ranks)
+    distributed.init_process_group(device, ranks)
 
     resume_from = None
     if args.resume:
@@ -160,20 +148,21 @@ def prepare(args: argparse.Namespace):
     if args.profile:
         train_cfg.profile = args.profile
     if train_cfg.seed == -1:
-        train_cfg.seed = random.SystemRandom().randrange(10000)
+        train_cfg.seed = distributed.shared_random_seed()
     # --orc names the experiment unless one is given; a resumed run keeps its own otherwise.
     if args.experiment_name is None and (not train_cfg.experiment_name or (args.resume and args.orc is not None)):
         train_cfg.experiment_name = derived_experiment_name(task, env_cfg)
     if not train_cfg.run_name:
         train_cfg.run_name = f"seed{train_cfg.seed}"
     runs.check_folder_names(train_cfg.experiment_name, train_cfg.run_name)
-    device = _resolve_device(args.device, world, local_rank)
+    if ranks.is_distributed and env_cfg.sim.num_threads == 0:
+        env_cfg.sim.num_threads = distributed.thread_share(ranks)
     env_cfg.env.device = device
-    env_cfg.env.seed = train_cfg.seed + rank
+    env_cfg.env.seed = train_cfg.seed + ranks.rank
     if resume_from is not None:
         train_cfg.resumed_from = resume_from
 
-    seed_everything(train_cfg.seed + rank)
+    seed_everything(train_cfg.seed + ranks.rank)
     # The task edits the config it gets (ORC applies itself); the YAML keeps the config as given.
     env = TaskVecEnv(make_env(task, copy.deepcopy(env_cfg)), device=device)
     runner = TaskRunner(env, train_cfg, log_dir=None, device=device)
@@ -185,7 +174,7 @@ def prepare(args: argparse.Namespace):
                 f"checkpoint {resume_from} is at iteration {runner.current_learning_iteration} and max_iterations is "
                 f"{train_cfg.max_iterations}; pass a larger --max_iterations"
             )
-    return Setup(task, env_cfg, train_cfg, runner, log_root, rank)
+    return Setup(task, env_cfg, train_cfg, runner, log_root, ranks.rank)
 
 
 @dataclass
@@ -206,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from gym_envs.config import save_yaml
     from gym_envs.sim import SimSetupError
-    from learning import runs
+    from learning import distributed, runs
     from learning.runner import StopRequest
 
     threads_before = torch.get_num_threads()
@@ -219,6 +208,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"train.py: error: {runs.one_line(err)}", file=sys.stderr)
             return 1
         env_cfg, train_cfg, runner = setup.env_cfg, setup.train_cfg, setup.runner
+        if distributed.ranks_from_env().is_distributed:
+            torch.set_num_threads(env_cfg.sim.num_threads)  # this process's share (torchrun sets 1)
+        distributed.barrier()  # every rank has read the runs it resumes before rank 0 adds a folder
         if setup.rank == 0:
             run_dir = runs.create_run_dir(setup.log_root, train_cfg.experiment_name, train_cfg.run_name)
             save_yaml(env_cfg, os.path.join(run_dir, runs.ENV_YAML))
@@ -228,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"task {setup.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
             print(f"run folder {run_dir}{resuming}", flush=True)
 
-        with StopRequest() as stop:
+        with StopRequest(announce=setup.rank == 0) as stop:
             finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
         if finished:
             return 0
@@ -238,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     finally:
         torch.set_num_threads(threads_before)
+        distributed.shut_down()
 
 
 if __name__ == "__main__":
