@@ -40,8 +40,9 @@ ranks) start under torchrun, on CPU processes (gloo) or one GPU each (NCCL, cuda
     torchrun --standalone --nproc_per_node=4 train.py --task mini_cheetah_osc --device cuda --sim warp
 
 Each process simulates --num_envs robots with seed + RANK; --num_threads 0 (the default) gives
-each process its share of the cores. Only rank 0 writes the run folder and prints progress;
-Ctrl-C reaches every rank, and rank 0 saves before all exit.
+each process's physics its share of the cores (torch keeps torchrun's OMP_NUM_THREADS, 1). Only
+rank 0 writes the run folder and prints progress; Ctrl-C reaches every rank, and rank 0 saves
+before all exit.
 """
 
 from __future__ import annotations
@@ -208,8 +209,6 @@ def main(argv: list[str] | None = None) -> int:
             print(f"train.py: error: {runs.one_line(err)}", file=sys.stderr)
             return 1
         env_cfg, train_cfg, runner = setup.env_cfg, setup.train_cfg, setup.runner
-        if distributed.ranks_from_env().is_distributed:
-            torch.set_num_threads(env_cfg.sim.num_threads)  # this process's share (torchrun sets 1)
         distributed.barrier()  # every rank has read the runs it resumes before rank 0 adds a folder
         if setup.rank == 0:
             run_dir = runs.create_run_dir(setup.log_root, train_cfg.experiment_name, train_cfg.run_name)
