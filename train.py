@@ -52,12 +52,19 @@ WANDB_MODE=offline). --video N records --video_length seconds of robot 0 every N
 and W&B receives each clip.
 
 Devices. --device cpu|cuda puts the task's tensors and the learner there; the 'mujoco' physics
-always runs on CPU threads (--num_threads, which also caps torch's CPU threads). Multi-GPU
-(rsl-rl's data-parallel PPO, one process per GPU, each with --num_envs robots):
+always runs on CPU threads (--num_threads, which also caps torch's CPU threads).
 
-    torchrun --standalone --nproc_per_node=2 train.py --task mini_cheetah_osc --device cuda --sim warp
+Several processes (data-parallel PPO: gradients, KL and observation statistics averaged over
+ranks) start under torchrun, on CPU processes (gloo) or one GPU each (NCCL, cuda:<LOCAL_RANK>); the
+device is chosen as for one process (without --device: CUDA when torch sees it, else the CPU):
 
-Each process uses cuda:<LOCAL_RANK> and seed + RANK; only rank 0 writes the run folder.
+    torchrun --standalone --nproc_per_node=2 train.py --task mini_cheetah_osc --num_threads 1
+    torchrun --standalone --nproc_per_node=4 train.py --task mini_cheetah_osc --device cuda --sim warp
+
+Each process simulates --num_envs robots with seed + RANK; --num_threads 0 (the default) gives
+each process's physics its share of the cores (torch keeps torchrun's OMP_NUM_THREADS, 1). Only
+rank 0 writes the run folder and prints progress; Ctrl-C reaches every rank, and rank 0 saves
+before all exit.
 """
 
 from __future__ import annotations
@@ -107,29 +114,10 @@ def build_parser() -> cli.Parser:
     return p
 
 
-def _distributed() -> tuple[int, int, int]:
-    """(world size, global rank, local rank) from torchrun's environment."""
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    return world, int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
-
-
 def _cuda_available() -> bool:
     import torch
 
     return torch.cuda.is_available()
-
-
-def _resolve_device(requested: str | None, world: int, local_rank: int) -> str:
-    import torch
-
-    device = requested or ("cuda" if world > 1 else "cpu")
-    if device == "cuda":
-        if not torch.cuda.is_available():
-            raise ConfigError("--device cuda, but torch sees no CUDA device (this torch build or machine has none)")
-        return f"cuda:{local_rank}"
-    if world > 1:
-        raise ConfigError(f"torchrun started {world} processes; multi-process training needs --device cuda")
-    return "cpu"
 
 
 def seed_everything(seed: int) -> None:
@@ -160,10 +148,11 @@ class Plan:
 
 
 def resolve(args: argparse.Namespace) -> Plan:
-    """The configs of the run args ask for, every value checked; nothing is built or written."""
+    """The configs of the run args ask for, every value checked; nothing is built or written (under torchrun
+    the process joins its group here: a drawn seed is rank 0's)."""
     from gym_envs import env_cfg_class
     from gym_envs.orc import parse_orc
-    from learning import runs
+    from learning import distributed, runs
     from learning.runner_config import (
         apply_split_overrides,
         check_logger_ready,
@@ -174,9 +163,13 @@ def resolve(args: argparse.Namespace) -> Plan:
     from learning.machine import choose_defaults, warp_installed
 
     log_root = args.log_root or runs.default_log_root()
-    world, rank, local_rank = _distributed()
-    defaults = choose_defaults(args.device or ("cuda" if world > 1 else None), args.profile, args.sim,
-                               cuda_available=_cuda_available(), warp_available=warp_installed(), resume=args.resume)
+    ranks = distributed.ranks_from_env()
+    # The machine's defaults decide cpu or cuda; under torchrun each process takes cuda:<local rank>,
+    # and the process group's backend follows (gloo on CPU, NCCL on CUDA).
+    defaults = choose_defaults(args.device, args.profile, args.sim, cuda_available=_cuda_available(),
+                               warp_available=warp_installed(), resume=args.resume)
+    device = distributed.resolve_device(defaults.device, ranks)
+    distributed.init_process_group(device, ranks)
 
     resume_from = trained_env_cfg = None
     if args.resume:
@@ -225,22 +218,24 @@ def resolve(args: argparse.Namespace) -> Plan:
     if defaults.profile:
         train_cfg.profile = defaults.profile
     if train_cfg.seed == -1:
-        train_cfg.seed = random.SystemRandom().randrange(10000)
+        train_cfg.seed = distributed.shared_random_seed()
     # --orc names the experiment unless one is given; a resumed run keeps its own otherwise.
     if args.experiment_name is None and (not train_cfg.experiment_name or (args.resume and args.orc is not None)):
         train_cfg.experiment_name = derived_experiment_name(task, env_cfg)
     if not train_cfg.run_name:
         train_cfg.run_name = f"seed{train_cfg.seed}"
-    device = _resolve_device(defaults.device, world, local_rank)
+    if ranks.is_distributed and env_cfg.sim.num_threads == 0:
+        env_cfg.sim.num_threads = distributed.thread_share(ranks)
     env_cfg.env.device = device
-    env_cfg.env.seed = train_cfg.seed + rank
+    env_cfg.env.seed = train_cfg.seed + ranks.rank
     env_cfg.validate()
     train_cfg.validate(env_cfg.env.num_envs)
     if hasattr(env_cfg, "osc"):
         parse_orc(env_cfg.osc.orc)
     runs.check_folder_names(train_cfg.experiment_name, train_cfg.run_name)
     check_logger_ready(train_cfg)
-    return Plan(task, env_cfg, train_cfg, log_root, rank, world, device, defaults, resume_from, trained_env_cfg)
+    return Plan(task, env_cfg, train_cfg, log_root, ranks.rank, ranks.world_size, device, defaults, resume_from,
+                trained_env_cfg)
 
 
 def build(plan: Plan) -> Setup:
@@ -293,7 +288,7 @@ def _main(args: argparse.Namespace) -> int:
     import torch
 
     from gym_envs.config import save_yaml
-    from learning import runs
+    from learning import distributed, runs
     from learning.machine import expected_duration
     from learning.runner import StopRequest
 
@@ -316,6 +311,7 @@ def _main(args: argparse.Namespace) -> int:
             task = setup.runner.env.task
             setup.runner.video = TrainingVideo(task.sim, task.dt, args.video, args.video_length)
         env_cfg, train_cfg, runner = setup.env_cfg, setup.train_cfg, setup.runner
+        distributed.barrier()  # every rank has read the runs it resumes before rank 0 adds a folder
         if setup.rank == 0:
             if plan.resume_from:
                 runs.remove_stale_temps(os.path.dirname(plan.resume_from))
@@ -331,7 +327,7 @@ def _main(args: argparse.Namespace) -> int:
             print(f"task {setup.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
             print(f"run folder {run_dir}{resuming}", flush=True)
 
-        with StopRequest() as stop:
+        with StopRequest(announce=setup.rank == 0) as stop:
             finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
         if finished:
             return 0
@@ -341,6 +337,7 @@ def _main(args: argparse.Namespace) -> int:
         return EXIT_INTERRUPTED
     finally:
         torch.set_num_threads(threads_before)
+        distributed.shut_down()
 
 
 if __name__ == "__main__":
