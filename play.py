@@ -4,11 +4,15 @@
     python play.py --task mini_cheetah_osc --orc 110 --command 1.0 --coupling off --duration 20
     python play.py --load_run 2025-01-01_12-00-00_seed3 --checkpoint 1000 --video walk.mp4 --headless
     python play.py --export                              # writes <run>/exported/policy.pt and policy.onnx
+    python play.py --shipped --orc 110                   # the shipped ORC 110 policy, whatever runs exist
 
 Which policy. --load_run (a run folder name or path) and --checkpoint (iteration, -1 newest)
 pick it; otherwise the newest run with a checkpoint under the log root, restricted to
 --experiment_name, --task and --orc when given. If there is none and --orc is given, the shipped
-policy in resources/policies/ORC_<orc>/ (env.yaml, train.yaml, model_*.pt) is used.
+policy in resources/policies/ORC_<orc>/ (env.yaml, train.yaml, model_*.pt) is used; --shipped
+always plays the shipped one. The first line printed names the checkpoint, its iteration and why
+it was chosen. --print_config prints the resolved env config (and the run's train config) as
+YAML and exits.
 
 What it runs. The env is rebuilt from the run's env.yaml (the task name comes from its
 train.yaml) and changed for evaluation:
@@ -30,16 +34,18 @@ backend; MUJOCO_GL defaults to egl when there is no display). Without --headless
 display, a passive MuJoCo viewer shows robot 0: arrow keys up/down change v_x by 0.5 m/s,
 left/right the yaw rate by 0.5 rad/s, comma/period v_y by 0.25 m/s; it runs until the window
 closes unless --duration is given. --export writes the TorchScript and ONNX policy (input: the
-actor observation, batch 1 for ONNX; output: actions) to <run>/exported/, both ONNX files with deployment metadata (observation terms in order
-with their scales, action scale, default joint positions, Kp/Kd, control and physics rates, ORC and
-oscillator constants), and for oscillator tasks controller.onnx: the whole controller in one graph
-(raw readings, per-substep foot forces, command and phases in; joint targets and new phases out;
-see learning/export.py).
+actor observation, batch 1 for ONNX; output: actions) to <run>/exported/, or for a shipped
+policy to <log_root>/shipped/ORC_<orc>/exported/ (resources/ is never written): both ONNX files
+carry deployment metadata (observation terms in order with their scales, action scale, default
+joint positions, Kp/Kd, control and physics rates, ORC and oscillator constants), and for
+oscillator tasks controller.onnx is the whole controller in one graph (raw readings, per-substep
+foot forces, command and phases in; joint targets and new phases out; see learning/export.py).
+
+Every flag and config value is checked before anything is built; a bad one is one line on stderr.
 """
 
 from __future__ import annotations
 
-import os
 import sys
 
 from learning.video import VideoRecorder, has_display, prefer_offscreen_gl
@@ -47,30 +53,30 @@ from learning.video import VideoRecorder, has_display, prefer_offscreen_gl
 prefer_offscreen_gl()  # must run before mujoco is imported
 _HAS_DISPLAY = has_display()
 
-import argparse  # noqa: E402
 import time  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from typing import Any  # noqa: E402
 
 from gym_envs.config import ConfigError  # noqa: E402
 from gym_envs.evaluation import evaluation_overrides  # noqa: E402
+from learning import cli  # noqa: E402
 
 DEFAULT_DURATION_S = 10.0
 KEY_UP, KEY_DOWN, KEY_LEFT, KEY_RIGHT, KEY_COMMA, KEY_PERIOD = 265, 264, 263, 262, 44, 46
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="play.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+def build_parser() -> cli.Parser:
+    p = cli.Parser("play.py", __doc__)
     p.add_argument("--task", help="task name; optional when a run is found (read from its train.yaml)")
-    p.add_argument("--orc", help="pick the newest run with this ORC string (or the shipped ORC_<orc> policy)")
-    p.add_argument("--load_run", help="run folder name (in the experiment) or path")
-    p.add_argument("--checkpoint", type=int, default=-1, help="iteration to load (-1: the newest)")
-    p.add_argument("--experiment_name", help="look for runs in this experiment only")
-    p.add_argument("--log_root", help="folder of experiments (default: $ORCGYM_LOG_ROOT or <repo>/logs)")
-    p.add_argument("--num_envs", type=int, default=50, help="robots (default 50)")
-    p.add_argument("--duration", type=float, help=f"simulated seconds (default {DEFAULT_DURATION_S:g}; "
-                   "in the viewer, until the window closes)")
-    p.add_argument("--command", type=float, nargs="+", metavar="V", default=[1.0, 0.0, 0.0],
+    p.add_argument("--orc", type=cli.orc, help="pick the newest run with this ORC string (or the shipped ORC_<orc> "
+                   "policy)")
+    p.add_argument("--shipped", action="store_true", help="play the shipped policy resources/policies/ORC_<orc> "
+                   "(--orc, default 111) even when runs exist")
+    cli.add_run_selection(p, "play")
+    p.add_argument("--num_envs", type=cli.integer(1), default=50, help="robots (default 50)")
+    p.add_argument("--duration", type=cli.number(0.0, low_open=True),
+                   help=f"simulated seconds (default {DEFAULT_DURATION_S:g}; in the viewer, until the window closes)")
+    p.add_argument("--command", type=cli.number(), nargs="+", metavar="V", default=[1.0, 0.0, 0.0],
                    help="VX [VY YAW]: fixed body-frame command (default 1 0 0)")
     p.add_argument("--osc_init", choices=("random", "trot", "pace", "bound", "pronk", "standing"),
                    help="initial oscillator phases (default: the run's, i.e. random)")
@@ -78,35 +84,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", action="store_true", help="keep observation/oscillator noise and jitter")
     p.add_argument("--pushes", action="store_true", help="keep random pushes")
     p.add_argument("--randomize", action="store_true", help="keep domain randomisation and randomised resets")
-    p.add_argument("--seed", type=int, help="env.seed (default: the run's)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="env config override, repeatable (e.g. osc.coupling_max=0.5)")
-    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="task tensors and policy")
-    p.add_argument("--sim", choices=("mujoco", "warp"), help="physics backend (default: the run's)")
-    p.add_argument("--num_threads", type=int, help="CPU threads of the physics and of torch")
+    p.add_argument("--seed", type=cli.integer(0), help="env.seed (default: the run's)")
+    cli.add_overrides(p, "env config override, repeatable (e.g. osc.coupling_max=0.5)")
+    cli.add_compute(p, device_default="cpu")
     p.add_argument("--headless", action="store_true", help="never open a viewer window")
-    p.add_argument("--video", metavar="FILE.mp4", help="render robot 0 to this video")
-    p.add_argument("--export", action="store_true", help="write exported/policy.pt, policy.onnx and controller.onnx (with metadata) in the run")
+    p.add_argument("--video", metavar="FILE.mp4", type=cli.new_file(".mp4"), help="render robot 0 to this video")
+    p.add_argument("--export", action="store_true", help="write exported/policy.pt, policy.onnx and controller.onnx "
+                   "(with metadata; in the run folder, for a shipped policy in <log_root>/shipped/ORC_<orc>/)")
+    cli.add_print_config(p)
     return p
 
 
-def locate_run(args, log_root: str) -> str:
+def locate_run(args, log_root: str) -> tuple[str, str]:
+    """(run folder, why it was chosen)."""
     from learning import runs
 
+    if args.shipped:
+        if args.load_run:
+            raise ConfigError("--shipped and --load_run both choose the policy; pass one of them")
+        orc = args.orc or "111"
+        shipped = runs.shipped_policy_dir(orc)
+        if not (runs.is_run_dir(shipped) and runs.list_checkpoints(shipped)):
+            raise runs.RunError(f"no shipped policy at {shipped}")
+        return shipped, f"the shipped ORC {orc} policy"
     if args.load_run:
-        return runs.find_run(log_root, args.load_run, experiment=args.experiment_name)
+        return runs.find_run(log_root, args.load_run, experiment=args.experiment_name), "--load_run"
     try:
-        return runs.find_run(log_root, None, experiment=args.experiment_name, task=args.task, orc=args.orc)
+        run_dir = runs.find_run(log_root, None, experiment=args.experiment_name, task=args.task, orc=args.orc)
     except runs.RunError as err:
-        if not args.orc:
+        if not args.orc or "cannot be read" in str(err):
             raise
         shipped = runs.shipped_policy_dir(args.orc)
         if runs.is_run_dir(shipped) and runs.list_checkpoints(shipped):
-            return shipped
+            return shipped, f"the shipped ORC {args.orc} policy (no run of it under {log_root})"
         raise runs.RunError(
             f"{err}; no shipped policy at {shipped} either (train one: python train.py --task "
             f"{args.task or 'mini_cheetah_osc'} --orc {args.orc})"
         ) from None
+    filters = " ".join(f for f in (f"task {args.task}" if args.task else "",
+                                    f"ORC {args.orc}" if args.orc else "") if f)
+    return run_dir, f"the newest run{' of ' + filters if filters else ''} under {log_root}"
 
 
 def play_overrides(env_cfg, args) -> list[str]:
@@ -137,41 +154,66 @@ def play_overrides(env_cfg, args) -> list[str]:
     return items
 
 
+@dataclass
+class Choice:
+    """The policy play.py will run and its evaluation configs, checked; nothing built yet."""
+
+    run_dir: str
+    chosen_as: str  # why this run: shown to the user
+    checkpoint: str
+    iteration: int
+    task_name: str
+    trained_env_cfg: Any  # as in the run's env.yaml
+    env_cfg: Any  # the evaluation env config
+    train_cfg: Any
+    log_root: str
+
+    @property
+    def orc(self) -> str | None:
+        return getattr(getattr(self.env_cfg, "osc", None), "orc", None)
+
+
+def choose(args) -> Choice:
+    import torch
+
+    from gym_envs.config import apply_overrides
+    from learning import runs
+
+    if any(item.strip().startswith("train.") for item in args.overrides):
+        raise ConfigError("play.py takes env overrides only; train.* keys have no effect here")
+    if args.device == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("--device cuda, but torch sees no CUDA device")
+    log_root = args.log_root or runs.default_log_root()
+    run_dir, chosen_as = locate_run(args, log_root)
+    checkpoint = runs.find_checkpoint(run_dir, args.checkpoint)
+    task, trained_env, train_cfg = runs.load_run_configs(run_dir)
+    if args.task and args.task != task:
+        raise ConfigError(f"run {run_dir} trained task {task!r}, not {args.task!r}")
+    env_cfg = apply_overrides(trained_env, play_overrides(trained_env, args) + list(args.overrides))
+    env_cfg.validate()
+    return Choice(run_dir, chosen_as, checkpoint, runs.checkpoint_iteration(checkpoint), task, trained_env, env_cfg,
+                  train_cfg, log_root)
+
+
 class Session:
     """The loaded policy and its evaluation env."""
 
-    def __init__(self, args):
-        import torch
-
+    def __init__(self, args, choice: Choice | None = None):
         from gym_envs import make_env
-        from gym_envs.config import apply_overrides
         from gym_envs.orc import parse_orc
         from learning import runs
         from learning.runner import TaskRunner
         from learning.vec_env import TaskVecEnv
 
-        if any(item.strip().startswith("train.") for item in args.overrides):
-            raise ConfigError("play.py takes env overrides only; train.* keys have no effect here")
-        if args.device == "cuda" and not torch.cuda.is_available():
-            raise ConfigError("--device cuda, but torch sees no CUDA device")
-        log_root = args.log_root or runs.default_log_root()
-        self.run_dir = locate_run(args, log_root)
-        self.checkpoint = runs.find_checkpoint(self.run_dir, args.checkpoint)
-        saved_task, trained_env, train_cfg = runs.load_run_configs(self.run_dir)
-        if args.task and args.task != saved_task:
-            raise ConfigError(f"run {self.run_dir} trained task {saved_task!r}, not {args.task!r}")
-        self.task_name = saved_task
-        env_cfg = apply_overrides(trained_env, play_overrides(trained_env, args) + list(args.overrides))
-        self.orc = getattr(getattr(env_cfg, "osc", None), "orc", None)
-        if self.orc is not None:
-            orc = parse_orc(self.orc)
-            if args.coupling == "on" and not orc.coupling:
-                print(f"note: ORC {self.orc} has C=0, so the coupling stays 0; pass --orc with C=1 to couple")
-        self.env_cfg = env_cfg
-        self.env = TaskVecEnv(make_env(saved_task, env_cfg), device=args.device)
-        self.runner = TaskRunner(self.env, train_cfg, log_dir=None, device=args.device)
-        self.runner.load(self.checkpoint, load_cfg={"actor": True}, context=f"task {saved_task} as configured",
-                         cause=runs.orc_mismatch_cause(trained_env, env_cfg))
+        self.choice = choice = choice or choose(args)
+        self.run_dir, self.checkpoint, self.task_name, self.orc = (choice.run_dir, choice.checkpoint,
+                                                                   choice.task_name, choice.orc)
+        if self.orc is not None and args.coupling == "on" and not parse_orc(self.orc).coupling:
+            print(f"note: ORC {self.orc} has C=0, so the coupling stays 0; pass --orc with C=1 to couple")
+        self.env = TaskVecEnv(make_env(choice.task_name, choice.env_cfg), device=args.device)
+        self.runner = TaskRunner(self.env, choice.train_cfg, log_dir=None, device=args.device)
+        self.runner.load(self.checkpoint, load_cfg={"actor": True}, context=f"task {choice.task_name} as configured",
+                         cause=runs.orc_mismatch_cause(choice.trained_env_cfg, choice.env_cfg))
         self.policy = self.runner.get_inference_policy(args.device)
 
     @property
@@ -267,10 +309,12 @@ class Viewer:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    return cli.run(build_parser(), _main, argv)
+
+
+def _main(args) -> int:
     import torch
 
-    from gym_envs.sim import SimSetupError
     from learning import runs
 
     threads_before = torch.get_num_threads()
@@ -278,20 +322,24 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.num_threads:
             torch.set_num_threads(args.num_threads)
-        try:
-            session = Session(args)
-            if args.video:
-                video = VideoRecorder(session.task.sim, session.env.dt, args.video)
-        except (ConfigError, SimSetupError) as err:
-            print(f"play.py: error: {runs.one_line(err)}", file=sys.stderr)
-            return 1
-        print(f"policy {session.checkpoint} | task {session.task_name}"
-              + (f" (ORC {session.orc})" if session.orc else "") + f" | {session.env.num_envs} robots")
+        choice = choose(args)
+        if args.print_config:
+            print(cli.config_yaml(choice.env_cfg, choice.train_cfg), end="")
+            return 0
+        session = Session(args, choice)
+        if args.video:
+            video = VideoRecorder(session.task.sim, session.env.dt, args.video)
+        print(f"policy {choice.checkpoint} (iteration {choice.iteration}; {choice.chosen_as}) | task "
+              f"{choice.task_name}" + (f" (ORC {choice.orc})" if choice.orc else "")
+              + f" | {session.env.num_envs} robots")
+        if not runs.is_shipped(choice.run_dir):
+            print("other policies: --load_run RUN --checkpoint N; the shipped one: --shipped --orc "
+                  f"{choice.orc or '111'}")
         if args.export:
             from learning.export import export_deployment
 
-            paths = export_deployment(session.runner, session.task, os.path.join(session.run_dir, runs.EXPORT_DIR),
-                                      session.checkpoint)
+            paths = export_deployment(session.runner, session.task, runs.export_dir(choice.run_dir, choice.log_root),
+                                      choice.checkpoint)
             print(f"exported {', '.join(paths)}")
 
         interactive = not args.headless and _HAS_DISPLAY and video is None
@@ -301,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
             print("no display: running without a viewer")
         duration = args.duration if args.duration is not None else (None if interactive else DEFAULT_DURATION_S)
         dt = session.env.dt
-        steps = None if duration is None else max(0, round(duration / dt))
+        steps = None if duration is None else max(1, round(duration / dt))
         tracker = Tracker(dt, session.env.num_envs)
         obs = session.env.get_observations()
         step = 0

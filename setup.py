@@ -22,6 +22,7 @@ setup(
         "onnxruntime>=1.17",
         "imageio>=2.31",
         "imageio-ffmpeg>=0.4.9",
+        "tqdm>=4.60,<5",
     ],
     extras_require={
         "test": ["pytest>=7"],

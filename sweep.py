@@ -9,11 +9,11 @@ interrupted one in place from its newest checkpoint (its configs must match the 
 <out>/manifest.csv lists configuration, seed, iterations, wall time, final reward and final
 tracking error (mean |command - velocity| of the last episodes) of every run; it is rewritten
 after each run. Ctrl-C stops the current run with a checkpoint and ends the sweep (exit 130).
+Every run's flags and config values are checked before the first folder is made.
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
 import glob
 import os
@@ -25,9 +25,8 @@ import yaml
 import train
 from gym_envs.config import ConfigError, apply_overrides, load_yaml, save_yaml, to_dict
 from gym_envs.files import atomic_write
-from gym_envs.orc import PAPER_CONFIGURATIONS, parse_orc
-from gym_envs.sim import SimSetupError
-from learning import runs
+from gym_envs.orc import PAPER_CONFIGURATIONS
+from learning import cli, runs
 from learning.runner import StopRequest
 
 MANIFEST = "manifest.csv"
@@ -35,20 +34,19 @@ STATUS = "sweep_status.yaml"
 FIELDS = ("orc", "seed", "iterations", "wall_time_s", "final_reward", "tracking_error", "run_dir")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=__doc__.split("\n", 2)[2],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default=os.path.join(runs.default_log_root(), "sweep"), help="sweep folder")
-    parser.add_argument("--orcs", nargs="+", default=list(PAPER_CONFIGURATIONS), help="ORC strings (default: the 7 of the paper)")
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
-    parser.add_argument("--max_iterations", type=int, default=None, help="per run (default: the train config's)")
-    parser.add_argument("--num_envs", type=int, default=None)
+def build_parser() -> cli.Parser:
+    parser = cli.Parser("sweep.py", __doc__)
+    parser.add_argument("--out", type=cli.folder, default=os.path.join(runs.default_log_root(), "sweep"),
+                        help="sweep folder")
+    parser.add_argument("--orcs", nargs="+", type=cli.orc, default=list(PAPER_CONFIGURATIONS),
+                        help="ORC strings (default: the 7 of the paper)")
+    parser.add_argument("--seeds", nargs="+", type=cli.integer(0), default=[0])
+    parser.add_argument("--max_iterations", type=cli.integer(1), default=None,
+                        help="total PPO iterations per run (default: the train config's)")
+    parser.add_argument("--num_envs", type=cli.integer(1), default=None)
     parser.add_argument("--profile", default=None, help="as in train.py (default: cpu_fast on cpu, paper on cuda)")
-    parser.add_argument("--num_threads", type=int, default=None)
-    parser.add_argument("--device", choices=("cpu", "cuda"), default=None)
-    parser.add_argument("--sim", choices=("mujoco", "warp"), default=None)
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="config override for every run, as in train.py")
+    cli.add_compute(parser)
+    cli.add_overrides(parser, "config override for every run, as in train.py")
     return parser
 
 
@@ -153,21 +151,29 @@ def write_manifest(out: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        for orc in args.orcs:
-            parse_orc(orc)
-        os.makedirs(args.out, exist_ok=True)
-        for orc in args.orcs:
-            for seed in args.seeds:
-                outcome = train_one(args, orc, seed)
-                print(f"ORC {orc} seed {seed}: {outcome}", flush=True)
-                write_manifest(args.out)
-                if outcome == "stopped":
-                    return train.EXIT_INTERRUPTED
-    except (ConfigError, SimSetupError) as err:
-        print(f"sweep.py: error: {runs.one_line(err)}", file=sys.stderr)
-        return 1
+    return cli.run(build_parser(), _main, argv)
+
+
+# Keys each run of the sweep sets itself (from --orcs, --seeds and its folder layout).
+SWEEP_KEYS = ("osc.orc", "train.seed", "train.experiment_name", "train.run_name")
+
+
+def _main(args) -> int:
+    for item in args.overrides:
+        if item.partition("=")[0].strip() in SWEEP_KEYS:
+            raise ConfigError(f"--set {item}: the sweep sets {', '.join(SWEEP_KEYS)} for each run (--orcs, --seeds)")
+    # Every run's configs are checked before the first folder is made.
+    for orc in args.orcs:
+        for seed in args.seeds:
+            train.resolve(train.build_parser().parse_args(train_args(args, orc, seed)))
+    os.makedirs(args.out, exist_ok=True)
+    for orc in args.orcs:
+        for seed in args.seeds:
+            outcome = train_one(args, orc, seed)
+            print(f"ORC {orc} seed {seed}: {outcome}", flush=True)
+            write_manifest(args.out)
+            if outcome == "stopped":
+                return train.EXIT_INTERRUPTED
     print(f"manifest: {write_manifest(args.out)}")
     return 0
 

@@ -2,8 +2,9 @@
 
     python train.py --task mini_cheetah_osc --orc 110 --seed 3
     python train.py --task mini_cheetah_osc --profile cpu_fast --set train.algorithm.learning_rate=3e-4
-    python train.py --resume                      # newest run, its newest checkpoint, up to train.max_iterations
-    python train.py --resume --load_run 2025-01-01_12-00-00_seed3 --checkpoint 500 --max_iterations 3000
+    python train.py --resume                      # newest run, its newest checkpoint, on to its planned total
+    python train.py --resume --load_run 2025-01-01_12-00-00_seed3 --checkpoint 500 --max_iterations 1000
+    python train.py --task mini_cheetah_osc --profile cpu_fast --print_config   # the resolved configs as YAML
 
 Configs. The task's defaults (gym_envs env config + learning.runner_config train config) are
 changed, in this order, by --profile, by each --set KEY=VALUE, and last by the dedicated options
@@ -21,14 +22,21 @@ Resuming (--resume) loads a checkpoint and writes a *new* run folder: the old ru
 modified, and the new one records `resumed_from`. The env and train configs are the old run's
 YAMLs, changed by any options given now. The iteration count continues (the next iteration after
 model_500.pt is number 501, its tensorboard step 500), so the two folders' curves join up when
-tensorboard shows the experiment folder. --max_iterations is the total to reach, not a count to add.
+tensorboard shows the experiment folder.
+
+Iterations. --max_iterations is the number of PPO iterations this command runs, as in legged_gym:
+a new run's total, and on --resume the iterations *added* to the checkpoint's (resuming
+model_500.pt with --max_iterations 1000 ends at model_1500.pt; a finished run continues the same
+way). --resume without it continues to the run's planned total (train.max_iterations, which
+train.yaml always records as a total) and says so when the run has already reached it.
 
 Seeds. --seed (default 0; -1 draws one) seeds python, numpy and torch, and becomes env.seed;
 train.yaml and env.yaml record the values used.
 
 Ctrl-C stops at the next env step and saves model_<completed iterations>.pt (exit status 130);
-a second Ctrl-C aborts without saving. Errors in the inputs print one line and exit with status 1
-before anything is written.
+a second Ctrl-C aborts without saving. Every flag and config value is checked before anything is
+built or written; a bad one is one line on stderr naming it and what is allowed (exit status 1;
+2 for a malformed flag). --debug shows the traceback of any error.
 
 Defaults that fit the machine (learning/machine.py). Without --device the run uses CUDA when torch
 sees a device, else the CPU; without --profile it trains the paper's settings on CUDA and the CPU
@@ -44,12 +52,19 @@ WANDB_MODE=offline). --video N records --video_length seconds of robot 0 every N
 and W&B receives each clip.
 
 Devices. --device cpu|cuda puts the task's tensors and the learner there; the 'mujoco' physics
-always runs on CPU threads (--num_threads, which also caps torch's CPU threads). Multi-GPU
-(rsl-rl's data-parallel PPO, one process per GPU, each with --num_envs robots):
+always runs on CPU threads (--num_threads, which also caps torch's CPU threads).
 
-    torchrun --standalone --nproc_per_node=2 train.py --task mini_cheetah_osc --device cuda --sim warp
+Several processes (data-parallel PPO: gradients, KL and observation statistics averaged over
+ranks) start under torchrun, on CPU processes (gloo) or one GPU each (NCCL, cuda:<LOCAL_RANK>); the
+device is chosen as for one process (without --device: CUDA when torch sees it, else the CPU):
 
-Each process uses cuda:<LOCAL_RANK> and seed + RANK; only rank 0 writes the run folder.
+    torchrun --standalone --nproc_per_node=2 train.py --task mini_cheetah_osc --num_threads 1
+    torchrun --standalone --nproc_per_node=4 train.py --task mini_cheetah_osc --device cuda --sim warp
+
+Each process simulates --num_envs robots with seed + RANK; --num_threads 0 (the default) gives
+each process's physics its share of the cores (torch keeps torchrun's OMP_NUM_THREADS, 1). Only
+rank 0 writes the run folder and prints progress; Ctrl-C reaches every rank, and rank 0 saves
+before all exit.
 """
 
 from __future__ import annotations
@@ -63,69 +78,46 @@ from dataclasses import dataclass
 from typing import Any
 
 from gym_envs.config import ConfigError
+from learning import cli
 
-EXIT_INTERRUPTED = 130
+EXIT_INTERRUPTED = cli.EXIT_INTERRUPTED
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="train.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+def build_parser() -> cli.Parser:
+    p = cli.Parser("train.py", __doc__)
     p.add_argument("--task", help="task name (mini_cheetah_osc, mini_cheetah); with --resume, defaults to the run's")
-    p.add_argument("--orc", help="ORC string for oscillator tasks (sets osc.orc; experiment ORC_<orc> by default)")
-    p.add_argument("--num_envs", type=int, help="robots (per process under torchrun)")
-    p.add_argument("--max_iterations", type=int, help="total PPO iterations of the run (a resumed run continues to it)")
-    p.add_argument("--seed", type=int, help="seed of python/numpy/torch and env.seed (-1: draw one); default 0")
+    p.add_argument("--orc", type=cli.orc, help="ORC string for oscillator tasks (sets osc.orc; experiment ORC_<orc>)")
+    p.add_argument("--num_envs", type=cli.integer(1), help="robots (per process under torchrun)")
+    p.add_argument("--max_iterations", type=cli.integer(1),
+                   help="PPO iterations to run: a new run's total; with --resume, iterations added to the "
+                        "checkpoint's (default: train.max_iterations; --resume: on to the run's planned total)")
+    p.add_argument("--seed", type=cli.integer(-1), help="seed of python/numpy/torch and env.seed (-1: draw one); "
+                   "default 0")
     p.add_argument("--headless", action="store_true", help="accepted for compatibility; training never renders")
     p.add_argument("--resume", action="store_true", help="continue from a checkpoint (newest run unless --load_run)")
-    p.add_argument("--load_run", help="run to resume: a folder name in the experiment, or a path")
-    p.add_argument("--checkpoint", type=int, default=-1, help="iteration to resume from (-1: the newest)")
-    p.add_argument("--experiment_name", help="experiment folder under the log root")
-    p.add_argument("--run_name", help="suffix of the run folder name (default seed<seed>)")
-    p.add_argument("--device", choices=("cpu", "cuda"), help="task tensors and learner (default: cuda when torch sees "
-                   "a CUDA device, else cpu)")
-    p.add_argument("--sim", choices=("mujoco", "warp"), help="physics backend, sets sim.backend (default: warp on cuda "
-                   "when the gpu extra is installed, else mujoco)")
-    p.add_argument("--num_threads", type=int, help="CPU threads of the physics and of torch (0: all cores)")
+    cli.add_run_selection(p, "resume")
+    p.add_argument("--run_name", type=cli.name, help="suffix of the run folder name (default seed<seed>)")
+    cli.add_compute(p)
     p.add_argument("--profile", help="named override set from learning.runner_config.PROFILES: paper, cpu_fast "
                    "(default: paper on cuda, cpu_fast on cpu; a resumed run keeps its own)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="config override, repeatable: train.<key> for the train config, other keys for the env config")
+    cli.add_overrides(p, "config override, repeatable: train.<key> for the train config, other keys for the env "
+                         "config")
     p.add_argument("--logger", choices=("tensorboard", "wandb", "neptune"),
                    help="where metrics go besides the run folder's tensorboard events (default tensorboard); "
                    "wandb and neptune need their extra: pip install -e \".[wandb]\" / \".[neptune]\"")
     p.add_argument("--log_project_name", help="W&B or Neptune project (default orcgym)")
-    p.add_argument("--video", type=int, metavar="N", help="every N iterations, record a clip of robot 0 into "
-                   "<run>/videos/iter_<it>.mp4 (uploaded to W&B with --logger wandb; offscreen, MUJOCO_GL=egl)")
-    p.add_argument("--video_length", type=float, default=2.0, metavar="SECONDS",
+    p.add_argument("--video", type=cli.integer(1), metavar="N", help="every N iterations, record a clip of robot 0 "
+                   "into <run>/videos/iter_<it>.mp4 (uploaded to W&B with --logger wandb; offscreen, MUJOCO_GL=egl)")
+    p.add_argument("--video_length", type=cli.number(0.0, low_open=True), default=2.0, metavar="SECONDS",
                    help="simulated seconds per --video clip (default 2)")
-    p.add_argument("--log_root", help="folder of experiments (default: $ORCGYM_LOG_ROOT or <repo>/logs)")
+    cli.add_print_config(p)
     return p
-
-
-def _distributed() -> tuple[int, int, int]:
-    """(world size, global rank, local rank) from torchrun's environment."""
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    return world, int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
 
 
 def _cuda_available() -> bool:
     import torch
 
     return torch.cuda.is_available()
-
-
-def _resolve_device(requested: str | None, world: int, local_rank: int) -> str:
-    import torch
-
-    device = requested or ("cuda" if world > 1 else "cpu")
-    if device == "cuda":
-        if not torch.cuda.is_available():
-            raise ConfigError("--device cuda, but torch sees no CUDA device (this torch build or machine has none)")
-        return f"cuda:{local_rank}"
-    if world > 1:
-        raise ConfigError(f"torchrun started {world} processes; multi-process training needs --device cuda")
-    return "cpu"
 
 
 def seed_everything(seed: int) -> None:
@@ -139,12 +131,28 @@ def seed_everything(seed: int) -> None:
         torch.cuda.manual_seed_all(seed)
 
 
-def prepare(args: argparse.Namespace):
-    """Configs, env and runner, checked and built; nothing is written yet."""
-    from gym_envs import env_cfg_class, make_env
+@dataclass
+class Plan:
+    """What `resolve` decided: configs checked, device chosen, nothing built or written."""
+
+    task: str
+    env_cfg: Any  # the task's env config dataclass
+    train_cfg: Any  # learning.runner_config.TrainCfg
+    log_root: str
+    rank: int
+    world: int
+    device: str
+    defaults: Any  # learning.machine.RunDefaults
+    resume_from: str | None = None
+    trained_env_cfg: Any = None  # env config of the run resumed from
+
+
+def resolve(args: argparse.Namespace) -> Plan:
+    """The configs of the run args ask for, every value checked; nothing is built or written (under torchrun
+    the process joins its group here: a drawn seed is rank 0's)."""
+    from gym_envs import env_cfg_class
     from gym_envs.orc import parse_orc
-    from learning import runs
-    from learning.runner import TaskRunner
+    from learning import distributed, runs
     from learning.runner_config import (
         apply_split_overrides,
         check_logger_ready,
@@ -153,14 +161,17 @@ def prepare(args: argparse.Namespace):
         train_cfg_class,
     )
     from learning.machine import choose_defaults, warp_installed
-    from learning.vec_env import TaskVecEnv
 
     log_root = args.log_root or runs.default_log_root()
-    world, rank, local_rank = _distributed()
-    defaults = choose_defaults(args.device or ("cuda" if world > 1 else None), args.profile, args.sim,
-                               cuda_available=_cuda_available(), warp_available=warp_installed(), resume=args.resume)
+    ranks = distributed.ranks_from_env()
+    # The machine's defaults decide cpu or cuda; under torchrun each process takes cuda:<local rank>,
+    # and the process group's backend follows (gloo on CPU, NCCL on CUDA).
+    defaults = choose_defaults(args.device, args.profile, args.sim, cuda_available=_cuda_available(),
+                               warp_available=warp_installed(), resume=args.resume)
+    device = distributed.resolve_device(defaults.device, ranks)
+    distributed.init_process_group(device, ranks)
 
-    resume_from = None
+    resume_from = trained_env_cfg = None
     if args.resume:
         run_dir = runs.find_run(log_root, args.load_run, experiment=args.experiment_name, task=args.task, orc=args.orc)
         resume_from = runs.find_checkpoint(run_dir, args.checkpoint)
@@ -177,51 +188,82 @@ def prepare(args: argparse.Namespace):
         env_cfg = env_cfg_class(task)()
         train_cfg = train_cfg_class(task)()
 
+    for item in args.overrides:
+        key = item.partition("=")[0].strip()
+        if key in ("env.device", "env.seed"):
+            raise ConfigError(f"{key} follows --{key[4:]} (and the process rank under torchrun); pass --{key[4:]}")
     env_cfg, train_cfg = apply_split_overrides(env_cfg, train_cfg, profile_overrides(defaults.profile) + args.overrides)
     if args.orc is not None and not hasattr(env_cfg, "osc"):
         raise ConfigError(f"--orc needs a task with oscillators; {task!r} has none")
     flags = {
         "osc.orc": args.orc, "env.num_envs": args.num_envs,
-        "sim.backend": defaults.sim, "sim.num_threads": args.num_threads,
-        "train.max_iterations": args.max_iterations, "train.seed": args.seed,
+        "sim.backend": defaults.sim, "sim.num_threads": args.num_threads, "train.seed": args.seed,
         "train.experiment_name": args.experiment_name, "train.run_name": args.run_name,
+        "train.max_iterations": None if args.resume else args.max_iterations,
         "train.logger": args.logger, "train.log_project_name": args.log_project_name,
     }
     env_cfg, train_cfg = apply_split_overrides(
         env_cfg, train_cfg, [f"{key}={value}" for key, value in flags.items() if value is not None]
     )
-    if hasattr(env_cfg, "osc"):
-        parse_orc(env_cfg.osc.orc)
+    if resume_from is not None:
+        start = runs.checkpoint_iteration(resume_from)
+        if args.max_iterations is not None:
+            train_cfg.max_iterations = start + args.max_iterations
+        elif train_cfg.max_iterations <= start:
+            raise ConfigError(
+                f"checkpoint {resume_from} is at iteration {start}, the run's planned total (train.max_iterations "
+                f"{train_cfg.max_iterations}); add --max_iterations N to train N more iterations"
+            )
+        train_cfg.resumed_from = resume_from
     if defaults.profile:
         train_cfg.profile = defaults.profile
     if train_cfg.seed == -1:
-        train_cfg.seed = random.SystemRandom().randrange(10000)
+        train_cfg.seed = distributed.shared_random_seed()
     # --orc names the experiment unless one is given; a resumed run keeps its own otherwise.
     if args.experiment_name is None and (not train_cfg.experiment_name or (args.resume and args.orc is not None)):
         train_cfg.experiment_name = derived_experiment_name(task, env_cfg)
     if not train_cfg.run_name:
         train_cfg.run_name = f"seed{train_cfg.seed}"
+    if ranks.is_distributed and env_cfg.sim.num_threads == 0:
+        env_cfg.sim.num_threads = distributed.thread_share(ranks)
+    env_cfg.env.device = device
+    env_cfg.env.seed = train_cfg.seed + ranks.rank
+    env_cfg.validate()
+    train_cfg.validate(env_cfg.env.num_envs)
+    if hasattr(env_cfg, "osc"):
+        parse_orc(env_cfg.osc.orc)
     runs.check_folder_names(train_cfg.experiment_name, train_cfg.run_name)
     check_logger_ready(train_cfg)
-    device = _resolve_device(defaults.device, world, local_rank)
-    env_cfg.env.device = device
-    env_cfg.env.seed = train_cfg.seed + rank
-    if resume_from is not None:
-        train_cfg.resumed_from = resume_from
+    return Plan(task, env_cfg, train_cfg, log_root, ranks.rank, ranks.world_size, device, defaults, resume_from,
+                trained_env_cfg)
 
-    seed_everything(train_cfg.seed + rank)
+
+def build(plan: Plan) -> Setup:
+    """Seed, then build the env and the runner (and load the checkpoint to resume from); nothing is written."""
+    from gym_envs import make_env
+    from learning import runs
+    from learning.runner import TaskRunner
+    from learning.vec_env import TaskVecEnv
+
+    env_cfg, train_cfg = plan.env_cfg, plan.train_cfg
+    seed_everything(train_cfg.seed + plan.rank)
     # The task edits the config it gets (ORC applies itself); the YAML keeps the config as given.
-    env = TaskVecEnv(make_env(task, copy.deepcopy(env_cfg)), device=device)
-    runner = TaskRunner(env, train_cfg, log_dir=None, device=device)
-    if resume_from is not None:
-        runner.load(resume_from, context=f"task {task} as configured now",
-                    cause=runs.orc_mismatch_cause(trained_env_cfg, env_cfg))
+    env = TaskVecEnv(make_env(plan.task, copy.deepcopy(env_cfg)), device=plan.device)
+    runner = TaskRunner(env, train_cfg, log_dir=None, device=plan.device)
+    if plan.resume_from is not None:
+        runner.load(plan.resume_from, context=f"task {plan.task} as configured now",
+                    cause=runs.orc_mismatch_cause(plan.trained_env_cfg, env_cfg))
         if train_cfg.max_iterations <= runner.current_learning_iteration:
             raise ConfigError(
-                f"checkpoint {resume_from} is at iteration {runner.current_learning_iteration} and max_iterations is "
-                f"{train_cfg.max_iterations}; pass a larger --max_iterations"
+                f"checkpoint {plan.resume_from} records iteration {runner.current_learning_iteration}, at or past "
+                f"train.max_iterations {train_cfg.max_iterations}; pass --max_iterations N to train N more"
             )
-    return Setup(task, env_cfg, train_cfg, runner, log_root, rank, world, defaults)
+    return Setup(plan.task, env_cfg, train_cfg, runner, plan.log_root, plan.rank, plan.world, plan.defaults)
+
+
+def prepare(args: argparse.Namespace) -> Setup:
+    """Configs, env and runner, checked and built; nothing is written yet."""
+    return build(resolve(args))
 
 
 @dataclass
@@ -239,12 +281,14 @@ class Setup:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    return cli.run(build_parser(), _main, argv)
+
+
+def _main(args: argparse.Namespace) -> int:
     import torch
 
     from gym_envs.config import save_yaml
-    from gym_envs.sim import SimSetupError
-    from learning import runs
+    from learning import distributed, runs
     from learning.machine import expected_duration
     from learning.runner import StopRequest
 
@@ -256,18 +300,21 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.num_threads:
             torch.set_num_threads(args.num_threads)
-        try:
-            setup = prepare(args)
-            if args.video is not None and setup.rank == 0:
-                from learning.video import TrainingVideo
+        plan = resolve(args)
+        if args.print_config:
+            print(cli.config_yaml(plan.env_cfg, plan.train_cfg), end="")
+            return 0
+        setup = build(plan)
+        if args.video is not None and setup.rank == 0:
+            from learning.video import TrainingVideo
 
-                task = setup.runner.env.task
-                setup.runner.video = TrainingVideo(task.sim, task.dt, args.video, args.video_length)
-        except (ConfigError, SimSetupError) as err:
-            print(f"train.py: error: {runs.one_line(err)}", file=sys.stderr)
-            return 1
+            task = setup.runner.env.task
+            setup.runner.video = TrainingVideo(task.sim, task.dt, args.video, args.video_length)
         env_cfg, train_cfg, runner = setup.env_cfg, setup.train_cfg, setup.runner
+        distributed.barrier()  # every rank has read the runs it resumes before rank 0 adds a folder
         if setup.rank == 0:
+            if plan.resume_from:
+                runs.remove_stale_temps(os.path.dirname(plan.resume_from))
             run_dir = runs.create_run_dir(setup.log_root, train_cfg.experiment_name, train_cfg.run_name)
             save_yaml(env_cfg, os.path.join(run_dir, runs.ENV_YAML))
             save_yaml(train_cfg, os.path.join(run_dir, runs.TRAIN_YAML))
@@ -280,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"task {setup.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
             print(f"run folder {run_dir}{resuming}", flush=True)
 
-        with StopRequest() as stop:
+        with StopRequest(announce=setup.rank == 0) as stop:
             finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
         if finished:
             return 0
@@ -290,6 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     finally:
         torch.set_num_threads(threads_before)
+        distributed.shut_down()
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ Usage: python -m analysis.balanced_legs --runs DIR --out DIR [--quick]
 from __future__ import annotations
 
 import csv
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -180,9 +181,9 @@ def _write_csv(path, rows, fields):
         w.writerows(rows)
 
 
-def main(argv=None):
-    cli_main(__doc__.splitlines()[0], run, argv)
+def main(argv=None) -> int:
+    return cli_main("analysis.balanced_legs", __doc__, run, argv)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

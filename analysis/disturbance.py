@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import csv
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -288,9 +289,9 @@ def plot_velocity(vel: dict, dt: float, push_window, magnitude: float, command: 
     return fig
 
 
-def main(argv=None):
-    cli_main(__doc__.splitlines()[0], run, argv)
+def main(argv=None) -> int:
+    return cli_main("analysis.disturbance", __doc__, run, argv)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

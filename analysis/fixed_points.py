@@ -10,9 +10,9 @@ Usage: python -m analysis.fixed_points --out results/fixed_points [--quick]
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -114,18 +114,31 @@ def _plot(phase, values, fps):
     return fig
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="results/fixed_points", help="output directory")
+def build_parser():
+    from learning import cli
+
+    parser = cli.Parser("analysis.fixed_points", __doc__)
+    parser.add_argument("--out", type=cli.folder, default="results/fixed_points", help="output directory")
     parser.add_argument("--quick", action="store_true", help="coarse grid, low-resolution PNG")
-    args = parser.parse_args(argv)
-    result = run(args.out, quick=args.quick)
-    for key in ("csv", "points_csv", "png", "pdf"):
-        print(f"{key}: {result[key]}")
-    for name, points in result["fixed_points"].items():
-        desc = ", ".join(f"{p:.3f} rad ({s})" for p, s in points) or "none"
-        print(f"{name}: {desc}")
+    return parser
+
+
+def main(argv=None) -> int:
+    from learning import cli
+
+    parser = build_parser()
+
+    def body(args) -> int:
+        result = run(args.out, quick=args.quick)
+        for key in ("csv", "points_csv", "png", "pdf"):
+            print(f"{key}: {result[key]}")
+        for name, points in result["fixed_points"].items():
+            desc = ", ".join(f"{p:.3f} rad ({s})" for p, s in points) or "none"
+            print(f"{name}: {desc}")
+        return 0
+
+    return cli.run(parser, body, argv)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

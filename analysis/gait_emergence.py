@@ -24,6 +24,7 @@ import csv
 import dataclasses
 import itertools
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -304,9 +305,9 @@ def plot_distribution(exp: Experiment, res: dict):
     return fig
 
 
-def main(argv=None):
-    cli_main(__doc__.splitlines()[0], run, argv)
+def main(argv=None) -> int:
+    return cli_main("analysis.gait_emergence", __doc__, run, argv)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

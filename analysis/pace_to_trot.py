@@ -20,6 +20,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -187,9 +188,9 @@ def _radial_ticks(r_max: float) -> list[float]:
     return list(np.arange(1, int(r_max / step + 1e-9) + 1) * step)
 
 
-def main(argv=None):
-    cli_main(__doc__.splitlines()[0], run, argv)
+def main(argv=None) -> int:
+    return cli_main("analysis.pace_to_trot", __doc__, run, argv)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

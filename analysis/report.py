@@ -9,21 +9,22 @@ Usage: python -m analysis.report --runs DIR --out DIR [--quick]
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import math
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from analysis import balanced_legs, disturbance, fixed_points, gait_emergence, obedience, pace_to_trot
+from gym_envs.config import ConfigError
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
 from analysis.plotting import LEG_NAMES, sort_configs
 from analysis.rollout import (
     DEFAULT_TASK,
     EvalSettings,
-    add_cli_args,
+    build_parser,
     eval_overrides,
     group_by_orc,
     runs_from_args,
@@ -346,21 +347,23 @@ def _section_fixed_points(fp: dict) -> list[str]:
 # --- command line ---------------------------------------------------------------------------------
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_cli_args(parser, out_default="report")
-    args = parser.parse_args(argv)
-    try:
+def main(argv=None) -> int:
+    from learning import cli
+
+    parser = build_parser("analysis.report", __doc__, out_default="report")
+
+    def body(args) -> int:
         policies = runs_from_args(args)
         if not any(p.task == DEFAULT_TASK for p in policies):
-            raise ValueError(f"no {DEFAULT_TASK} runs (env.yaml with osc.orc) in {args.runs or 'the shipped policies'}")
-    except (FileNotFoundError, RuntimeError, ValueError) as err:
-        parser.exit(2, f"error: {err}\n")
-    source = f"runs in {args.runs}" if args.runs else "shipped policies (resources/policies)"
-    result = build(policies, args.out, quick=args.quick, settings=EvalSettings(process_noise_std=args.process_noise),
-                   seed=args.seed, source=source)
-    print(f"report: {result['report']}")
+            raise ConfigError(f"no {DEFAULT_TASK} runs (env.yaml with osc.orc) in {args.runs or 'the shipped policies'}")
+        source = f"runs in {args.runs}" if args.runs else "shipped policies (resources/policies)"
+        result = build(policies, args.out, quick=args.quick, seed=args.seed, source=source,
+                       settings=EvalSettings(process_noise_std=args.process_noise))
+        print(f"report: {result['report']}")
+        return 0
+
+    return cli.run(parser, body, argv)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -22,7 +22,6 @@ that step; the recorded state is then the state after its reset.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import sys
 import time
@@ -33,10 +32,11 @@ import numpy as np
 import torch
 import yaml
 from tensordict import TensorDict
+from tqdm import tqdm
 
 from gym_envs.config import apply_overrides, to_dict
 from gym_envs.evaluation import evaluation_overrides
-from gym_envs.legged_robot import REPO_ROOT
+from gym_envs.legged_robot_config import REPO_ROOT
 from gym_envs.registry import make_env
 
 DEFAULT_TASK = "mini_cheetah_osc"
@@ -140,13 +140,8 @@ def find_run_dirs(root: str, depth: int = 2) -> list[str]:
 
 def load_policy_run(run_dir: str) -> PolicyRun:
     """Rebuild a run's env config and deterministic actor with learning's loader."""
-    try:
-        from learning.runs import load_policy
-    except ImportError:
-        raise RuntimeError(
-            f"cannot load {run_dir}: learning has no policy loader yet (expected learning.runs.load_policy(run_dir) "
-            f"-> env config, deterministic actor)"
-        ) from None
+    from learning.runs import load_policy
+
     loaded = load_policy(run_dir)
     return PolicyRun(
         name=os.path.relpath(run_dir, os.path.dirname(os.path.dirname(run_dir))),
@@ -270,47 +265,6 @@ class Rollout:
         )
 
 
-# --- progress -------------------------------------------------------------------------------------
-
-
-class ProgressBar:
-    """A one-line progress bar on stderr: redrawn in place on a terminal, a few plain lines otherwise."""
-
-    def __init__(self, total: int, label: str = "", enabled: bool = True, stream=None, width: int = 24):
-        self.total, self.label, self.enabled, self.width = max(int(total), 1), label, enabled, width
-        self.stream = stream or sys.stderr
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.start = time.perf_counter()
-        self._last_draw = 0.0
-        self._next_mark = 0.25
-
-    def update(self, done: int) -> None:
-        if not self.enabled:
-            return
-        frac = min(done / self.total, 1.0)
-        now = time.perf_counter()
-        if self.tty:
-            if now - self._last_draw >= 0.2 or done >= self.total:
-                self._last_draw = now
-                self.stream.write("\r" + self._line(done, frac, now))
-                if done >= self.total:
-                    self.stream.write("\n")
-                self.stream.flush()
-        elif frac >= self._next_mark - 1e-9:
-            while frac >= self._next_mark - 1e-9:
-                self._next_mark += 0.25
-            self.stream.write(self._line(done, frac, now) + "\n")
-            self.stream.flush()
-
-    def _line(self, done: int, frac: float, now: float) -> str:
-        filled = int(round(frac * self.width))
-        elapsed = now - self.start
-        eta = elapsed / frac - elapsed if frac > 0 else math.inf
-        eta_text = f"{eta:5.0f}s left" if done < self.total and math.isfinite(eta) else f"{elapsed:5.1f}s"
-        bar = "#" * filled + "." * (self.width - filled)
-        return f"{self.label} [{bar}] {100 * frac:3.0f}% {done}/{self.total} {eta_text}"
-
-
 # --- rolling out ----------------------------------------------------------------------------------
 
 
@@ -346,7 +300,8 @@ def rollout(
     n_rec = max(num_steps - record_from, 0)
     buffers = {name: np.zeros((n, n_rec) + SIGNALS[name].shape, SIGNALS[name].dtype) for name in record}
     initial_phase = env.phase.detach().cpu().numpy().copy()
-    bar = ProgressBar(num_steps, label, enabled=progress)
+    # A bar on a terminal only; run_jobs prints one summary line per call either way.
+    bar = tqdm(total=num_steps, desc=label, unit="step", leave=False, disable=not (progress and _on_terminal()))
     obs = env.get_observations()
     torch_threads = torch.get_num_threads()
     # The MuJoCo batch has the cores; torch's own thread pool fighting it for them makes the small
@@ -356,6 +311,7 @@ def rollout(
         _loop(env, policy, obs, num_steps, command, command_step, pushes, buffers, record_from, bar)
     finally:
         torch.set_num_threads(torch_threads)
+        bar.close()
     return Rollout(buffers, initial_phase, env.dt, num_steps, record_from)
 
 
@@ -372,7 +328,7 @@ def _loop(env, policy, obs, num_steps, command, command_step, pushes, buffers, r
             if k >= record_from:
                 for name, buf in buffers.items():
                     buf[:, k - record_from] = SIGNALS[name].read(env).detach().cpu().numpy()
-            bar.update(k + 1)
+            bar.update(1)
 
 
 def _push_plan(n, push_step, push_delta) -> dict[int, tuple[np.ndarray, np.ndarray]]:
@@ -433,6 +389,7 @@ def run_jobs(
         batches.append(current)
 
     results: list[Rollout | None] = [None] * len(jobs)
+    start = time.perf_counter()
     for b, members in enumerate(batches):
         counts = [jobs[i].num_envs for i in members]
         total = sum(counts)
@@ -449,7 +406,15 @@ def run_jobs(
             part.info.update(run=jobs[i].run.name, orc=jobs[i].run.orc, tag=jobs[i].tag, seed=seed + b,
                              settings=settings)
             results[i] = part
+    if progress:
+        robots = sum(j.num_envs for j in jobs)
+        print(f"{label}: {len(jobs)} jobs, {robots} robots x {num_steps} steps in {len(batches)} batches, "
+              f"{time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
     return results  # type: ignore[return-value]
+
+
+def _on_terminal() -> bool:
+    return sys.stderr.isatty()
 
 
 def _stack_pushes(jobs: Sequence[Job]):
@@ -469,20 +434,25 @@ def _stack_pushes(jobs: Sequence[Job]):
 # --- command line shared by the analysis modules ---------------------------------------------------
 
 
-def add_cli_args(parser, out_default: str | None = None) -> None:
-    parser.add_argument("--runs", default=None,
+def build_parser(prog: str, description: str, out_default: str | None = None):
+    """The flags every analysis module takes (learning.cli's style and checks)."""
+    from learning import cli
+
+    parser = cli.Parser(prog, description)
+    parser.add_argument("--runs", type=cli.folder, default=None,
                         help="folder of training runs (a sweep's output); default: the shipped policies")
-    parser.add_argument("--out", required=out_default is None, default=out_default,
+    parser.add_argument("--out", type=cli.folder, required=out_default is None, default=out_default,
                         help="output folder" + (f" (default: {out_default})" if out_default else ""))
     parser.add_argument("--quick", action="store_true", help="reduced sizes (minutes on 2 cores)")
-    parser.add_argument("--max-per-config", type=int, default=None,
+    parser.add_argument("--max_per_config", type=cli.integer(1), default=None,
                         help="use at most this many runs per ORC (default: all; 2 with --quick)")
-    parser.add_argument("--process-noise", type=float, default=0.0,
+    parser.add_argument("--process_noise", type=cli.number(0.0), default=0.0,
                         help="oscillator process noise [Hz] at evaluation (released scripts: 0.25)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=cli.integer(0), default=0)
+    return parser
 
 
-QUICK_MAX_PER_CONFIG = 2  # --quick without --max-per-config uses this many runs of each configuration
+QUICK_MAX_PER_CONFIG = 2  # --quick without --max_per_config uses this many runs of each configuration
 
 
 def runs_from_args(args) -> list[PolicyRun]:
@@ -490,21 +460,21 @@ def runs_from_args(args) -> list[PolicyRun]:
     return limit_per_config(load_runs(args.runs), limit)
 
 
-def cli_main(description: str, run_fn, argv=None) -> None:
+def cli_main(prog: str, description: str, run_fn, argv=None) -> int:
     """`python -m analysis.<module>`: load the runs, call run_fn(runs, out, quick, settings, seed), print paths.
 
-    Problems with the runs folder end the program with a one-line message instead of a traceback.
+    Errors take learning.cli's one error path: one line on stderr, no traceback (unless --debug).
     """
-    import argparse
+    from learning import cli
 
-    parser = argparse.ArgumentParser(description=description)
-    add_cli_args(parser)
-    args = parser.parse_args(argv)
-    try:
+    parser = build_parser(prog, description)
+
+    def body(args) -> int:
         runs = runs_from_args(args)
-    except (FileNotFoundError, RuntimeError, ValueError) as err:
-        parser.exit(2, f"error: {err}\n")
-    settings = EvalSettings(process_noise_std=args.process_noise)
-    summary = run_fn(runs, args.out, quick=args.quick, settings=settings, seed=args.seed)
-    for key, value in summary.get("files", {}).items():
-        print(f"{key}: {value}")
+        settings = EvalSettings(process_noise_std=args.process_noise)
+        summary = run_fn(runs, args.out, quick=args.quick, settings=settings, seed=args.seed)
+        for key, value in summary.get("files", {}).items():
+            print(f"{key}: {value}")
+        return 0
+
+    return cli.run(parser, body, argv)

@@ -57,15 +57,15 @@ def bench_mujoco(args) -> None:
     n, device = args.num_envs[0], torch.device("cpu")
     layer = make_backend(
         "mujoco", model_path=SCENE, num_envs=n, foot_sensors=FEET, termination_sensors=("base_force",),
-        num_threads=args.threads,
+        num_threads=args.num_threads,
     )
-    raw = mujoco.batch.Batch(layer.model, n, nthread=args.threads)
+    raw = mujoco.batch.Batch(layer.model, n, nthread=args.num_threads)
     raw.reset(keyframe=0)
     raw_ctrl = raw.bind("ctrl")
     home = layer.default_joint_pos
     targets = [home + 0.1 * a for a in random_actions(n, args.steps, device)]
     targets_np = [t.double().numpy() for t in targets]
-    env = build_env(n, "mujoco", args.threads, device)
+    env = build_env(n, "mujoco", args.num_threads, device)
     actions = random_actions(n, args.steps, device)
 
     def raw_step(i):
@@ -88,7 +88,7 @@ def bench_mujoco(args) -> None:
     def ratio(name):
         return statistics.median(a / b for a, b in zip(rates[name], rates["raw"]))
 
-    print(f"envs {n}, threads {args.threads}, substeps {args.substeps}, {args.rounds} rounds of {args.steps} steps")
+    print(f"envs {n}, threads {args.num_threads}, substeps {args.substeps}, {args.rounds} rounds of {args.steps} steps")
     print(f"raw mujoco.batch: {median['raw']:,.0f} env-steps/s ({median['raw'] * args.substeps:,.0f} physics steps/s)")
     print(f"layer (records + torch): {median['layer']:,.0f} env-steps/s")
     print(f"env (mini_cheetah_osc step): {median['env']:,.0f} env-steps/s")
@@ -119,7 +119,7 @@ def main() -> None:
     parser.add_argument("--sim", choices=("mujoco", "warp"), default="mujoco")
     parser.add_argument("--num_envs", type=int, nargs="+", default=None,
                         help="mujoco: one count (4096); warp: several (4096 8192 16384 on CUDA, 64 256 on CPU)")
-    parser.add_argument("--threads", type=int, default=2, help="mujoco backend threads")
+    parser.add_argument("--num_threads", type=int, default=2, help="mujoco backend threads")
     parser.add_argument("--device", default=None, help="warp: cuda or cpu (default: cuda when available)")
     parser.add_argument("--substeps", type=int, default=5)
     parser.add_argument("--steps", type=int, default=20, help="control steps per timed round")

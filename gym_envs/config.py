@@ -25,6 +25,7 @@ import copy
 import dataclasses
 import difflib
 import functools
+import math
 import os
 import re
 import types
@@ -36,7 +37,10 @@ import yaml
 
 from gym_envs.files import atomic_write
 
-__all__ = ["ConfigError", "to_dict", "from_dict", "apply_overrides", "save_yaml", "load_yaml"]
+__all__ = [
+    "ConfigError", "to_dict", "from_dict", "apply_overrides", "save_yaml", "load_yaml", "yaml_text",
+    "Range", "OneOf", "Ordered", "Check", "check_values",
+]
 
 
 class ConfigError(ValueError):
@@ -413,12 +417,18 @@ def apply_overrides(cfg: Any, overrides: list[str]) -> Any:
 # --------------------------------------------------------------------------- YAML files
 
 
+def yaml_text(data: Any) -> str:
+    """A config (dataclass instance) or plain data as YAML text in the dialect ``load_yaml`` reads."""
+    if dataclasses.is_dataclass(data) and not isinstance(data, type):
+        data = to_dict(data)
+    return yaml.dump(data, Dumper=_Dumper, sort_keys=False, default_flow_style=False, allow_unicode=True)
+
+
 def save_yaml(cfg: Any, path: str | os.PathLike) -> None:
     """Validate ``cfg`` and write it as YAML atomically (temp file in the same directory, then os.replace)."""
     path = os.fspath(path)
     # Round-trip through from_dict first: a config that load_yaml would reject is refused here, not at load time.
-    data = to_dict(from_dict(type(cfg), to_dict(cfg)))
-    text = yaml.dump(data, Dumper=_Dumper, sort_keys=False, default_flow_style=False, allow_unicode=True)
+    text = yaml_text(from_dict(type(cfg), to_dict(cfg)))
     with atomic_write(path) as f:
         f.write(text)
 
@@ -435,3 +445,124 @@ def load_yaml(cls: type, path: str | os.PathLike) -> Any:
         return from_dict(cls, {} if data is None else data)
     except ConfigError as err:
         raise ConfigError(f"{path}: {err}") from None
+
+
+# --------------------------------------------------------------------------- value checks
+# Types are checked when a config is built or overridden; these rules check what the values mean.
+# A rule is a callable: value -> None when allowed, else the text "what is allowed".
+
+
+def _numbers(value: Any):
+    """Every number inside a value (scalars, tuples, lists, dict values), bools excluded."""
+    if isinstance(value, bool):
+        return
+    if isinstance(value, (int, float)):
+        yield value
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            yield from _numbers(v)
+    elif isinstance(value, Mapping):
+        for v in value.values():
+            yield from _numbers(v)
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """Every number in the value lies in [low, high] (open ends when low_open / high_open)."""
+
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+
+    def allows(self, x: float) -> bool:
+        if self.low is not None and (x <= self.low if self.low_open else x < self.low):
+            return False
+        return self.high is None or (x < self.high if self.high_open else x <= self.high)
+
+    def describe(self) -> str:
+        if self.low is not None and self.high is not None:
+            left, right = "(" if self.low_open else "[", ")" if self.high_open else "]"
+            return f"a number in {left}{self.low:g}, {self.high:g}{right}"
+        if self.low is not None:
+            return f"a number {'>' if self.low_open else '>='} {self.low:g}"
+        return f"a number {'<' if self.high_open else '<='} {self.high:g}"
+
+    def __call__(self, value: Any) -> str | None:
+        return None if all(self.allows(x) for x in _numbers(value)) else self.describe()
+
+
+@dataclasses.dataclass(frozen=True)
+class OneOf:
+    values: tuple
+
+    def __call__(self, value: Any) -> str | None:
+        return None if value in self.values else "one of " + ", ".join(map(str, self.values))
+
+
+@dataclasses.dataclass(frozen=True)
+class Ordered:
+    """A (low, high) pair with low <= high, or a tuple of such pairs."""
+
+    def __call__(self, value: Any) -> str | None:
+        pairs = value if value and isinstance(value[0], (list, tuple)) else [value]
+        return None if all(lo <= hi for lo, hi in pairs) else "a range [low, high] with low <= high"
+
+
+@dataclasses.dataclass(frozen=True)
+class Check:
+    """Any other rule: `test(value)` is True when the value is allowed; `allowed` says what is."""
+
+    test: Any  # Callable[[Any], bool]
+    allowed: str
+
+    def __call__(self, value: Any) -> str | None:
+        return None if self.test(value) else self.allowed
+
+
+def _lookup(data: Any, key: str) -> Any:
+    """The value at a dotted key; None when a section on the way is None (an optional section left out)."""
+    for part in key.split("."):
+        if data is None:
+            return None
+        data = data[part]
+    return data
+
+
+def _non_finite(data: Any, path: str) -> tuple[str, float] | None:
+    """(key, value) of the first NaN or infinity in plain config data."""
+    if isinstance(data, float) and not math.isfinite(data):
+        return path, data
+    if isinstance(data, Mapping):
+        children = [(_join(path, k), v) for k, v in data.items()]
+    elif isinstance(data, list):
+        children = [(f"{path}[{i}]", v) for i, v in enumerate(data)]
+    else:
+        return None
+    for child_path, value in children:
+        found = _non_finite(value, child_path)
+        if found:
+            return found
+    return None
+
+
+def check_values(cfg: Any, rules: Mapping[str, Any], prefix: str = "") -> None:
+    """Every float finite and every ``rules[key]`` satisfied, else a one-line ConfigError naming the key.
+
+    ``prefix`` is put before key names in messages (``train.`` for the train config).
+    """
+    data = to_dict(cfg)
+    found = _non_finite(data, "")
+    if found:
+        raise ConfigError(f"config key '{prefix}{found[0]}' is {found[1]}; allowed: a finite number")
+    for key, rule in rules.items():
+        value = _lookup(data, key)
+        if value is None:
+            continue
+        # A rule on a dict applies to each of its values, so the message names the entry.
+        entries = [(_join(key, k), v) for k, v in value.items()] if isinstance(value, Mapping) else [(key, value)]
+        for name, entry in entries:
+            for one in rule if isinstance(rule, tuple) else (rule,):
+                allowed = one(entry)
+                if allowed:
+                    raise ConfigError(f"config key '{prefix}{name}' is {_short_repr(entry)}; allowed: {allowed}")

@@ -13,16 +13,13 @@ from __future__ import annotations
 
 import copy
 import math
-import os
 
 import torch
 from tensordict import TensorDict
 
 from gym_envs.config import ConfigError
-from gym_envs.legged_robot_config import CommandsCfg, LeggedRobotCfg
+from gym_envs.legged_robot_config import CommandsCfg, LeggedRobotCfg, model_file
 from gym_envs.sim import SimBackend, SimState, make_backend
-
-REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def quat_rotate_inverse(quat: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:
@@ -61,16 +58,14 @@ class LeggedRobot:
     cfg: LeggedRobotCfg
 
     def __init__(self, cfg: LeggedRobotCfg):
+        cfg.validate()  # before anything is built
         self.cfg = cfg = copy.deepcopy(cfg)  # tasks adjust their copy (ORC); the caller's stays as given
         self.device = torch.device(cfg.env.device)
         self.num_envs = cfg.env.num_envs
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.env.seed)
-        model_path = cfg.sim.model_path
-        if not os.path.isabs(model_path):
-            model_path = os.path.join(REPO_ROOT, model_path)
         self.sim: SimBackend = make_backend(
             cfg.sim.backend,
-            model_path=model_path,
+            model_path=model_file(cfg.sim.model_path),
             num_envs=self.num_envs,
             foot_sensors=tuple(cfg.sim.foot_sensors),
             termination_sensors=tuple(cfg.sim.termination_sensors),
@@ -123,12 +118,12 @@ class LeggedRobot:
     def _per_joint(self, values, name: str) -> torch.Tensor:
         """Expand one value, one per joint of a leg, or one per joint, to (num_joints,)."""
         v = torch.as_tensor(values, dtype=torch.float32, device=self.device).flatten()
-        j = self.num_actions
+        j, per_leg = self.num_actions, self.num_actions // self.num_legs
         if v.numel() in (1, j):
             return v.expand(j).clone()
-        if j % v.numel() == 0:
-            return v.repeat(j // v.numel())
-        raise ConfigError(f"{name} has {v.numel()} values; give 1, one per joint of a leg, or {j}")
+        if v.numel() == per_leg:
+            return v.repeat(self.num_legs)
+        raise ConfigError(f"{name} has {v.numel()} values; give 1, one per joint of a leg ({per_leg}), or {j}")
 
     def _init_reward_terms(self) -> None:
         self.reward_weights = {k: w for k, w in self.cfg.rewards.weights.items() if w != 0.0}

@@ -6,7 +6,13 @@ is saved as YAML next to each run's checkpoints, so a run can be rebuilt exactly
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from typing import ClassVar
+
+from gym_envs.config import Check, OneOf, Ordered, Range, check_values
+
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 @dataclass
@@ -114,8 +120,61 @@ class DomainRandCfg:
     )
 
 
+def model_file(path: str) -> str:
+    """sim.model_path as a file path (relative paths are from the repository root)."""
+    return path if os.path.isabs(path) else os.path.join(REPO_ROOT, path)
+
+
+POSITIVE, NON_NEGATIVE, SHARE = Range(0.0, low_open=True), Range(0.0), Range(0.0, 1.0)
+
+
 @dataclass
 class LeggedRobotCfg:
+    # What the values may be, beyond their types (all floats must also be finite); tasks extend it.
+    RULES: ClassVar[dict] = {
+        "env.num_envs": Range(1),
+        "env.episode_length_s": POSITIVE,
+        "env.device": Check(lambda d: d in ("cpu", "cuda") or d.startswith("cuda:"), "cpu, cuda or cuda:<index>"),
+        "sim.backend": OneOf(("mujoco", "warp")),
+        "sim.model_path": Check(lambda p: os.path.isfile(model_file(p)), "an existing MJCF file"),
+        "sim.num_threads": Range(0),
+        "sim.foot_sensors": Check(len, "at least one sensor name"),
+        "sim.termination_force": NON_NEGATIVE,
+        "control.frequency_hz": POSITIVE,
+        "control.action_scale": (Check(len, "at least one value"), POSITIVE),
+        "control.clip_actions": POSITIVE,
+        "commands.resampling_time_s": POSITIVE,
+        "commands.lin_vel_x": Ordered(),
+        "commands.lin_vel_x_noise": NON_NEGATIVE,
+        "commands.lin_vel_y": Ordered(),
+        "commands.yaw_rate": Ordered(),
+        "commands.small_command_norm": NON_NEGATIVE,
+        "commands.zero_lateral_and_yaw_prob": SHARE,
+        "commands.zero_planar_prob": SHARE,
+        "commands.zero_all_prob": SHARE,
+        "observations.actor": Check(len, "at least one observation term"),
+        "observations.critic": Check(len, "at least one observation term"),
+        "observations.scales": POSITIVE,
+        "observations.noise": NON_NEGATIVE,
+        "observations.noise_scale": NON_NEGATIVE,
+        "rewards.tracking_sigma": POSITIVE,
+        "rewards.base_height_target": POSITIVE,
+        "init_state.mode": OneOf(("range", "default")),
+        "init_state.base_height": POSITIVE,
+        "init_state.lin_vel_x": Ordered(),
+        "init_state.lin_vel_y": Ordered(),
+        "init_state.lin_vel_z": Ordered(),
+        "init_state.haa_noise": NON_NEGATIVE,
+        "init_state.timeout_reset_ratio": SHARE,
+        "push.interval_s": POSITIVE,
+        "push.max_vel_xy": NON_NEGATIVE,
+        "domain_rand.friction_range": (Ordered(), NON_NEGATIVE),
+        "domain_rand.friction_buckets": Range(1),
+        "domain_rand.ground_friction": NON_NEGATIVE,
+        "domain_rand.added_mass_range": Ordered(),
+        "domain_rand.com_offset_range": Ordered(),
+    }
+
     env: EnvCfg = field(default_factory=EnvCfg)
     sim: SimCfg = field(default_factory=SimCfg)
     control: ControlCfg = field(default_factory=ControlCfg)
@@ -125,3 +184,7 @@ class LeggedRobotCfg:
     init_state: InitStateCfg = field(default_factory=InitStateCfg)
     push: PushCfg = field(default_factory=PushCfg)
     domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)
+
+    def validate(self) -> None:
+        """Raise a one-line ConfigError for the first value outside its RULES (or not finite)."""
+        check_values(self, self.RULES)

@@ -7,13 +7,17 @@ the phase rewards and the coupling; see gym_envs/orc.py.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import torch
 
 from gym_envs import oscillators
-from gym_envs.config import ConfigError
+from gym_envs.config import Check, OneOf
 from gym_envs.legged_robot_config import (
+    NON_NEGATIVE,
+    SHARE,
     CommandsCfg,
     ControlCfg,
     DomainRandCfg,
@@ -49,6 +53,19 @@ class OscillatorCfg:
 
 @dataclass
 class MiniCheetahOscCfg(MiniCheetahCfg):
+    RULES: ClassVar[dict] = {
+        **MiniCheetahCfg.RULES,
+        "osc.orc": Check(lambda s: re.fullmatch("[01]{3}", s) is not None,
+                         "three digits of 0/1 for Observations, Rewards, Coupling, e.g. 111"),
+        "osc.init": OneOf(oscillators.PHASE_INIT_MODES),
+        "osc.process_noise_std": NON_NEGATIVE,
+        "osc.omega_noise_std": NON_NEGATIVE,
+        "osc.coupling_noise_std": NON_NEGATIVE,
+        "osc.coupling_max": NON_NEGATIVE,
+        "osc.coupling_off_prob": SHARE,
+        "osc.stand_threshold": NON_NEGATIVE,
+        "osc.grf_normaliser_mass": NON_NEGATIVE,
+    }
     env: EnvCfg = field(default_factory=lambda: EnvCfg(episode_length_s=4.0))
     control: ControlCfg = field(default_factory=lambda: ControlCfg(action_scale=(0.2, 0.3, 0.3)))
     commands: CommandsCfg = field(
@@ -134,10 +151,6 @@ class MiniCheetahOsc(MiniCheetah):
 
     def __init__(self, cfg: MiniCheetahOscCfg):
         self.orc = parse_orc(cfg.osc.orc)
-        if cfg.osc.init not in oscillators.PHASE_INIT_MODES:
-            raise ConfigError(
-                f"osc.init={cfg.osc.init!r} is unknown; choose one of {', '.join(oscillators.PHASE_INIT_MODES)}"
-            )
         super().__init__(cfg)
 
     def _init_timing(self) -> None:

@@ -68,14 +68,18 @@ def choose_defaults(device: str | None, profile: str | None, sim: str | None, *,
 
 def expected_duration(device: str, sim: str, num_envs: int, steps_per_env: int, iterations: int,
                       world_size: int = 1) -> str:
-    """One line: the expected wall time of `iterations` PPO iterations, and what the estimate rests on."""
-    steps = iterations * num_envs * steps_per_env
+    """One line: the expected wall time of `iterations` PPO iterations, and what the estimate rests on.
+
+    `world_size` processes (torchrun) each step `num_envs` robots; on the CPU they share the cores the rate was
+    measured on, so the estimate counts the env steps of all of them.
+    """
+    per_iteration = num_envs * steps_per_env * world_size
     if device == "cpu" and sim == "mujoco":
-        seconds = steps / CPU_FAST_STEPS_PER_S
-        return (f"expected duration: about {_human(seconds)} for {iterations} iterations x {num_envs * steps_per_env:,} "
+        seconds = iterations * per_iteration / CPU_FAST_STEPS_PER_S
+        return (f"expected duration: about {_human(seconds)} for {iterations} iterations x {per_iteration:,} "
                 f"env steps, at {CPU_REFERENCE} (more cores are faster); the progress lines give this machine's ETA")
     return (f"expected duration: no measured rate for {device} with {sim} physics ({iterations} iterations x "
-            f"{num_envs * steps_per_env * world_size:,} env steps); the progress lines give the ETA from the first iteration")
+            f"{per_iteration:,} env steps); the progress lines give the ETA from the first iteration")
 
 
 def _human(seconds: float) -> str:

@@ -10,7 +10,9 @@ as they are):
   * a stop request (Ctrl-C, see `StopRequest`) ends training at the next env step: the partial
     rollout is dropped and the last completed iteration is saved;
   * one compact progress line per iteration instead of rsl-rl's block; `Perf/env_steps_per_s`
-    (rollout throughput) is logged to tensorboard beside rsl-rl's `Perf/total_fps`.
+    (rollout throughput) is logged to tensorboard beside rsl-rl's `Perf/total_fps`;
+  * under torchrun the process group's backend follows the device (gloo on CPU, NCCL on CUDA; see
+    learning.distributed) instead of rsl-rl's NCCL-only `cuda:<local_rank>` set-up.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from rsl_rl.utils import check_nan
 from rsl_rl.utils.log_writer import LogWriter
 from rsl_rl.utils.logger import Logger
 
-from learning import runs
+from learning import distributed, runs
 from learning.runner_config import TrainCfg, to_rsl_rl_dict
 from learning.vec_env import TaskVecEnv
 
@@ -42,17 +44,23 @@ def quiet():
 
 
 class StopRequest:
-    """Turns SIGINT into a request that training honours at the next env step (a second Ctrl-C aborts)."""
+    """Turns SIGINT into a request that training honours at the next env step (a second Ctrl-C aborts).
 
-    def __init__(self) -> None:
+    Under torchrun the launcher passes a Ctrl-C on to every rank; only the one with `announce` says so.
+    """
+
+    def __init__(self, announce: bool = True) -> None:
         self.requested = False
+        self.announce = announce
         self._previous = None
 
     def _handle(self, signum, frame) -> None:
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
-        print("\nstopping after this step; saving a checkpoint (Ctrl-C again to abort without saving)", flush=True)
+        if self.announce:
+            print("\nstopping after this step; saving a checkpoint (Ctrl-C again to abort without saving)",
+                  flush=True)
 
     def __enter__(self) -> StopRequest:
         try:
@@ -123,6 +131,17 @@ class TaskRunner(OnPolicyRunner):
         self.log_dir = log_dir
         self.video = None  # a learning.video.TrainingVideo records clips of robot 0 while training when set
 
+    def _configure_multi_gpu(self) -> None:
+        # rsl-rl's names; "gpu" here means any process of a torchrun launch, CPU or GPU.
+        ranks = distributed.ranks_from_env()
+        self.is_distributed = ranks.is_distributed
+        self.gpu_world_size, self.gpu_global_rank, self.gpu_local_rank = ranks.world_size, ranks.rank, ranks.local_rank
+        self.cfg["multi_gpu"] = None
+        if self.is_distributed:
+            distributed.init_process_group(str(self.device), ranks)
+            self.cfg["multi_gpu"] = {"global_rank": ranks.rank, "local_rank": ranks.local_rank,
+                                     "world_size": ranks.world_size}
+
     def attach_run_dir(self, run_dir: str, progress_prefix: str = "") -> None:
         """Where checkpoints and tensorboard events go (set before `train`)."""
         self.log_dir = self.logger.log_dir = run_dir
@@ -165,6 +184,7 @@ class TaskRunner(OnPolicyRunner):
         alg.train_mode()
         if self.is_distributed:
             alg.broadcast_parameters()
+        distributed.log_sync_digest([alg.actor, alg.critic], self.current_learning_iteration, self.gpu_global_rank)
         with quiet():
             self.logger.init_logging_writer()
         start = self.current_learning_iteration
@@ -198,6 +218,7 @@ class TaskRunner(OnPolicyRunner):
                 losses = alg.update()
                 t2 = time.perf_counter()
                 self.current_learning_iteration = it + 1
+                distributed.log_sync_digest([alg.actor, alg.critic], it + 1, self.gpu_global_rank)
                 self.logger.log(
                     it=it, start_it=start, total_it=until, collect_time=t1 - t0, learn_time=t2 - t1,
                     loss_dict=losses, learning_rate=alg.learning_rate, action_std=alg.get_policy().output_std,
@@ -241,6 +262,8 @@ class TaskRunner(OnPolicyRunner):
         """Load a checkpoint (weights_only) after checking that its network sizes fit this task."""
         data = runs.load_checkpoint(path, map_location=map_location or self.device)
         runs.check_checkpoint_fits(data, path, *self.obs_dims, self.env.num_actions, context, cause)
+        runs.check_layer_shapes(data, path, {"actor_state_dict": self.alg.actor, "critic_state_dict": self.alg.critic},
+                                context)
         if self.alg.load(data, load_cfg, strict):
             self.current_learning_iteration = int(data.get("iter", 0))
         return data.get("infos")

@@ -13,10 +13,11 @@ Profiles (`PROFILES`) are named lists of such overrides, applied on top of the t
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
-from gym_envs.config import ConfigError, apply_overrides, to_dict
+from gym_envs.config import Check, ConfigError, OneOf, Range, apply_overrides, check_values, to_dict
 from gym_envs.registry import UnknownTaskError
 
 TRAIN_PREFIX = "train."
@@ -63,9 +64,68 @@ class ModelCfg:
     distribution_cfg: DistributionCfg | None = None
 
 
+def _folder_name(name: str) -> bool:
+    return os.sep not in name and name not in (".", "..")
+
+
+_POSITIVE = Range(0.0, low_open=True)
+_ACTIVATIONS = ("elu", "selu", "relu", "crelu", "lrelu", "tanh", "sigmoid", "softplus", "gelu", "swish", "mish",
+                "identity")  # rsl_rl.utils.resolve_nn_activation
+
+
+# --logger name -> (the package it needs, rsl-rl's writer class, environment variables the writer reads)
+LOGGERS: dict[str, tuple[str, str, tuple[str, ...]] | None] = {
+    "tensorboard": None,
+    "wandb": ("wandb", "WandbLogWriter", ()),
+    "neptune": ("neptune", "NeptuneLogWriter", ("NEPTUNE_API_TOKEN", "NEPTUNE_USERNAME")),
+}
+
+
+def _model_rules(name: str) -> dict:
+    return {
+        f"{name}.class_name": OneOf(("MLPModel",)),
+        f"{name}.hidden_dims": (Check(len, "at least one hidden layer"), Range(1)),
+        f"{name}.activation": OneOf(_ACTIVATIONS),
+        f"{name}.distribution_cfg.class_name": OneOf(("GaussianDistribution",)),
+        f"{name}.distribution_cfg.init_std": _POSITIVE,
+        f"{name}.distribution_cfg.std_type": OneOf(("scalar", "log")),
+    }
+
+
 @dataclass
 class TrainCfg:
     """Everything about learning; the env side lives in the task's env config."""
+
+    # What the values may be beyond their types (floats must also be finite); see gym_envs.config.check_values.
+    RULES: ClassVar[dict] = {
+        "task": Check(lambda t: t in TRAIN_CFGS, "a known task"),
+        "seed": Range(-1),
+        "num_steps_per_env": Range(1),
+        "max_iterations": Range(1),
+        "save_interval": Range(1),
+        "experiment_name": Check(_folder_name, "a plain folder name (no path separator)"),
+        "run_name": Check(_folder_name, "a plain folder name (no path separator)"),
+        "logger": OneOf(tuple(LOGGERS)),
+        # rsl-rl's Neptune writer prefixes the workspace (NEPTUNE_USERNAME) and a '/'; W&B takes the entity apart too
+        "log_project_name": Check(lambda name: bool(name) and "/" not in name, "a project name without '/'"),
+        "obs_groups": Check(lambda groups: groups and set(groups) <= {"actor", "critic"},
+                            "a non-empty list of the env's observation groups, actor and critic"),
+        "algorithm.class_name": OneOf(("PPO",)),
+        "algorithm.num_learning_epochs": Range(1),
+        "algorithm.num_mini_batches": Range(1),
+        "algorithm.clip_param": _POSITIVE,
+        "algorithm.gamma": Range(0.0, 1.0, low_open=True),
+        "algorithm.lam": Range(0.0, 1.0),
+        "algorithm.value_loss_coef": Range(0.0),
+        "algorithm.entropy_coef": Range(0.0),
+        "algorithm.learning_rate": _POSITIVE,
+        "algorithm.max_grad_norm": _POSITIVE,
+        "algorithm.optimizer": OneOf(("adam", "adamw", "sgd", "rmsprop")),  # rsl_rl.utils.resolve_optimizer
+        "algorithm.schedule": OneOf(("adaptive", "fixed")),
+        "algorithm.desired_kl": _POSITIVE,
+        **_model_rules("actor"),
+        **_model_rules("critic"),
+    }
 
     task: str = ""  # the gym_envs task this config trains; recorded so a run folder names its task
     seed: int = 0  # -1 draws one at start; the drawn value is what train.yaml records
@@ -87,6 +147,19 @@ class TrainCfg:
     # Provenance, written by train.py (setting them changes nothing):
     profile: str = ""  # the --profile the run was started with
     resumed_from: str = ""  # checkpoint a resumed run started from
+
+    def validate(self, num_envs: int) -> None:
+        """One-line ConfigError (keys with the 'train.' prefix) for a value outside RULES, or a batch
+        too small for its mini-batches (num_envs robots per process)."""
+        check_values(self, self.RULES, prefix=TRAIN_PREFIX)
+        if self.actor.distribution_cfg is None:
+            raise ConfigError("config key 'train.actor.distribution_cfg' is None; the actor needs a distribution")
+        batch = num_envs * self.num_steps_per_env
+        if self.algorithm.num_mini_batches > batch:
+            raise ConfigError(
+                f"config key 'train.algorithm.num_mini_batches' is {self.algorithm.num_mini_batches}; allowed: at "
+                f"most the batch of env.num_envs x train.num_steps_per_env = {batch}"
+            )
 
 
 @dataclass
@@ -248,13 +321,6 @@ def to_rsl_rl_dict(cfg: TrainCfg) -> dict:
 
 
 # --- loggers ----------------------------------------------------------------------------------
-
-# --logger name -> (the package it needs, rsl-rl's writer class, environment variables the writer reads)
-LOGGERS: dict[str, tuple[str, str, tuple[str, ...]] | None] = {
-    "tensorboard": None,
-    "wandb": ("wandb", "WandbLogWriter", ()),
-    "neptune": ("neptune", "NeptuneLogWriter", ("NEPTUNE_API_TOKEN", "NEPTUNE_USERNAME")),
-}
 
 
 def logger_cfg(cfg: TrainCfg) -> str | dict:

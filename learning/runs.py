@@ -12,13 +12,17 @@ Layout (one folder per training run; a resumed run gets a new folder):
 
 Checkpoints are written atomically (temporary file in the same folder, then os.replace) and read
 with `torch.load(weights_only=True)`: they hold only tensors, dicts, lists, numbers and strings.
+The hidden temporary file a killed save leaves behind is removed by the next save into that
+folder, and by train.py when it resumes from the folder.
 Every failure here is a `RunError` whose message is one line saying what exists.
 """
 
 from __future__ import annotations
 
 import datetime
+import glob
 import os
+import pickle
 import re
 from dataclasses import dataclass
 from typing import Any
@@ -97,10 +101,33 @@ def list_checkpoints(run_dir: str) -> list[int]:
     return sorted(found)
 
 
+def checkpoint_iteration(path: str) -> int:
+    """The iteration in a model_<it>.pt file name."""
+    m = _CHECKPOINT_RE.match(os.path.basename(path))
+    if not m:
+        raise RunError(f"{path} is not named model_<iteration>.pt")
+    return int(m.group(1))
+
+
+def remove_stale_temps(run_dir: str) -> list[str]:
+    """Delete the hidden `.model_<it>.pt.*.tmp` files that saves killed mid-write leave; returns their paths.
+
+    Only one process writes a run folder, so a temporary file present before it saves is stale.
+    """
+    stale = glob.glob(os.path.join(glob.escape(run_dir), ".model_*.pt.*.tmp"))
+    for path in stale:
+        os.remove(path)
+    return stale
+
+
 def save_checkpoint(data: dict, path: str) -> None:
     """torch.save to a temporary file beside `path`, then os.replace: readers never see half a file."""
+    remove_stale_temps(os.path.dirname(os.path.abspath(path)))
     with atomic_write(path, binary=True) as f:
         torch.save(data, f)
+
+
+_DISALLOWED_GLOBAL_RE = re.compile(r"unsupported GLOBAL (\S+)|Unsupported global: GLOBAL (\S+)")
 
 
 def load_checkpoint(path: str, map_location: str | torch.device | None = None) -> dict:
@@ -108,9 +135,16 @@ def load_checkpoint(path: str, map_location: str | torch.device | None = None) -
         raise RunError(f"checkpoint {path} does not exist")
     try:
         data = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as err:  # unpickling refused, truncated file, not a torch file
-        detail = " ".join(str(err).split())[:200]
-        raise RunError(f"cannot read checkpoint {path}: {type(err).__name__}: {detail}") from None
+    except pickle.UnpicklingError as err:  # weights_only refused an object that is not plain data
+        found = _DISALLOWED_GLOBAL_RE.search(str(err))
+        what = next(g for g in found.groups() if g) if found else "an object that is not plain data"
+        raise RunError(
+            f"refused checkpoint {path}: it holds {what}, and loading it could run code (orcgym checkpoints hold "
+            f"only tensors, numbers, strings, lists and dicts); use a checkpoint that orcgym wrote"
+        ) from None
+    except Exception as err:  # a truncated file, not a torch file
+        raise RunError(f"cannot read checkpoint {path}: the file is truncated or not a torch checkpoint "
+                       f"({type(err).__name__}: {' '.join(str(err).split())})") from None
     if not isinstance(data, dict) or "actor_state_dict" not in data:
         raise RunError(f"{path} is not an orcgym/rsl-rl checkpoint (no actor_state_dict)")
     return data
@@ -140,6 +174,35 @@ def check_checkpoint_fits(
         raise RunError(f"checkpoint {path} outputs {ckpt_actions} actions but {context} has {num_actions}")
 
 
+def check_layer_shapes(data: dict, path: str, models: dict[str, torch.nn.Module], context: str) -> None:
+    """Raise a RunError naming the first layer whose shape (or presence) differs between checkpoint and models.
+
+    models: checkpoint key (e.g. "actor_state_dict") -> the model it is loaded into. Called after
+    `check_checkpoint_fits`, so a difference here is in the hidden layers or the model layout.
+    """
+    for key, model in models.items():
+        if key not in data:
+            continue
+        saved, wanted = data[key], model.state_dict()
+        part = key.removesuffix("_state_dict")
+        for name in list(wanted) + [n for n in saved if n not in wanted]:
+            a = tuple(saved[name].shape) if name in saved else None
+            b = tuple(wanted[name].shape) if name in wanted else None
+            if a != b:
+                raise RunError(
+                    f"checkpoint {path} does not fit {context}: {part} layer {name} is {list(a) if a else 'absent'} "
+                    f"there but {list(b) if b else 'absent'} here; likely cause: other train.{part}.hidden_dims "
+                    f"(the checkpoint's: {hidden_dims(saved)}, configured: {hidden_dims(wanted)}); the configured "
+                    f"ones come from the run's train.yaml and any --profile or --set given now"
+                )
+
+
+def hidden_dims(state_dict: dict) -> list[int]:
+    """Hidden layer widths of an MLP state dict: the outputs of every linear layer but the last."""
+    weights = [v for k, v in state_dict.items() if k.endswith("weight") and getattr(v, "ndim", 0) == 2]
+    return [int(w.shape[0]) for w in weights[:-1]]
+
+
 # --- finding runs -----------------------------------------------------------------------------
 
 
@@ -152,11 +215,25 @@ class RunInfo:
     def read_yaml(self, name: str) -> dict:
         """The YAML as plain data (for filtering); {} if missing or unreadable."""
         try:
-            with open(os.path.join(self.path, name), encoding="utf-8") as f:
-                data = yaml.safe_load(f)
+            return self._load_yaml(name)
         except (OSError, yaml.YAMLError):
             return {}
-        return data if isinstance(data, dict) else {}
+
+    def _load_yaml(self, name: str) -> dict:
+        with open(os.path.join(self.path, name), encoding="utf-8") as f:
+            data = yaml.safe_load(f)
+        if not isinstance(data, dict):
+            raise yaml.YAMLError("not a mapping of keys to values")
+        return data
+
+    def unreadable(self) -> str:
+        """Why its env.yaml or train.yaml cannot be read ('' when both can)."""
+        for name in (ENV_YAML, TRAIN_YAML):
+            try:
+                self._load_yaml(name)
+            except (OSError, yaml.YAMLError) as err:
+                return f"{name}: {str(err).splitlines()[0] if str(err) else type(err).__name__}"
+        return ""
 
     @property
     def task(self) -> str | None:
@@ -240,6 +317,14 @@ def find_run(
         r for r in runs
         if (task is None or r.task == task) and (orc is None or r.orc == orc) and list_checkpoints(r.path)
     ]
+    if task is not None or orc is not None:
+        # A newer run that cannot be read might be the one meant: say so rather than pass over it.
+        newer = runs[runs.index(matching[-1]) + 1:] if matching else runs
+        for r in reversed(newer):
+            why = r.unreadable() if list_checkpoints(r.path) else ""
+            if why:
+                raise RunError(f"the newest run {r.path} cannot be read ({why}); fix or remove it, or choose a run "
+                               f"with --load_run")
     if not matching:
         where = os.path.join(log_root, experiment) if experiment else log_root
         wanted = " ".join(f for f in (f"task={task}" if task else "", f"orc={orc}" if orc else "") if f)
@@ -268,8 +353,16 @@ def shipped_policy_dir(orc: str) -> str:
     return os.path.join(POLICY_ROOT, f"ORC_{orc}")
 
 
-def one_line(err: BaseException) -> str:
-    return " ".join(str(err).split())
+def is_shipped(run_dir: str) -> bool:
+    return os.path.commonpath([os.path.abspath(run_dir), POLICY_ROOT]) == POLICY_ROOT
+
+
+def export_dir(run_dir: str, log_root: str) -> str:
+    """Where exports of a run go: <run>/exported, and for a shipped policy <log_root>/shipped/ORC_<xyz>/exported
+    (resources/ stays as the repository has it)."""
+    if is_shipped(run_dir):
+        return os.path.join(log_root, "shipped", os.path.basename(run_dir), EXPORT_DIR)
+    return os.path.join(run_dir, EXPORT_DIR)
 
 
 def run_task(run_dir: str) -> str | None:
@@ -337,6 +430,7 @@ def load_policy(run_dir: str, checkpoint: int = -1, device: str | torch.device =
     actor_cfg = dict(rsl["actor"])
     actor_cfg.pop("class_name")
     model = MLPModel(obs, rsl["obs_groups"], "actor", num_actions, **actor_cfg).to(device)
+    check_layer_shapes(data, path, {"actor_state_dict": model}, f"the actor of {os.path.join(run_dir, TRAIN_YAML)}")
     model.load_state_dict(data["actor_state_dict"])
     return LoadedPolicy(os.path.abspath(run_dir), path, int(data.get("iter", 0)), task, env_cfg, train_cfg,
                         DeterministicActor(model))

@@ -15,7 +15,6 @@ from analysis.rollout import (
     EvalSettings,
     Job,
     PolicyRun,
-    ProgressBar,
     StackedPolicy,
     eval_env_cfg,
     limit_per_config,
@@ -237,33 +236,24 @@ def test_rollout_end_to_end_with_a_random_policy():
         assert r.data["base_lin_vel"][1, 10, 0] > r.data["base_lin_vel"][[0, 2, 3], 10, 0].max() + 1.0
 
 
-def test_run_jobs_shares_a_batch_and_splits_results_per_policy():
+def test_run_jobs_shares_a_batch_and_splits_results_per_policy(capsys):
     runs = [_tiny_run("111", 0), _tiny_run("111", 1), _tiny_run("100", 2)]
     out = run_jobs([Job(runs[0], 2), Job(runs[1], 3), Job(runs[2], 2)], 5, record=("grf", "terminated"),
-                   num_threads=1, progress=False)
+                   num_threads=1, label="demo")
     assert [o.num_envs for o in out] == [2, 3, 2]
     assert [o.info["run"] for o in out] == [r.name for r in runs]
     assert out[0].info["seed"] == out[1].info["seed"] != out[2].info["seed"]  # 111s batched, 100 apart
     assert limit_per_config(runs, 1) == [runs[0], runs[2]]
-
-
-def test_progress_bar_without_a_terminal_prints_a_few_lines():
-    import io
-
-    stream = io.StringIO()
-    bar = ProgressBar(8, "demo", stream=stream)
-    for k in range(1, 9):
-        bar.update(k)
-    lines = stream.getvalue().splitlines()
-    assert len(lines) == 4 and lines[-1].startswith("demo [") and "100% 8/8" in lines[-1]
+    # Not on a terminal: no bar, one summary line for the whole call.
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("demo: 3 jobs, 7 robots x 5 steps in 2 batches"), err
 
 
 def test_report_with_an_empty_runs_folder_is_a_one_line_error(tmp_path, capsys):
-    with pytest.raises(SystemExit) as exit_info:
-        report.main(["--runs", str(tmp_path), "--out", str(tmp_path / "out")])
-    assert exit_info.value.code == 2
+    assert report.main(["--runs", str(tmp_path), "--out", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.startswith("error: no runs in") and "\n" not in err
+    assert err.startswith("analysis.report: error: no runs in") and "\n" not in err
+    assert not (tmp_path / "out").exists()
 
 
 def test_locomotion_check_of_a_standing_policy():

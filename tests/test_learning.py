@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 import pytest
@@ -209,8 +210,33 @@ def test_checkpoints_are_atomic_weights_only_and_size_checked(tmp_path):
         other.load(path, cause="x")
     bad = str(tmp_path / "model_1.pt")
     torch.save({"actor_state_dict": {}, "x": NotAllowed()}, bad)
-    with pytest.raises(runs.RunError, match="cannot read checkpoint"):
+    refusal = r"refused checkpoint .*model_1.pt: it holds tests.test_learning.NotAllowed, and loading it could run code"
+    with pytest.raises(runs.RunError, match=refusal) as refused:
         runs.load_checkpoint(bad)
+    assert "weights_only" not in str(refused.value)  # no advice to switch the protection off
+    truncated = str(tmp_path / "model_2.pt")
+    with open(path, "rb") as f, open(truncated, "wb") as g:
+        g.write(f.read()[:1000])
+    with pytest.raises(runs.RunError, match=r"cannot read checkpoint .*model_2.pt: .*failed finding central directory.*"
+                                            r"saved properly"):  # torch's whole reason, not the first 200 characters
+        runs.load_checkpoint(truncated)
+
+
+def test_a_save_removes_the_temporary_files_of_interrupted_saves(tmp_path):
+    stale = tmp_path / ".model_3.pt.x1y2.tmp"
+    stale.write_bytes(b"half a checkpoint")
+    small_runner(small_env(4)).save(str(tmp_path / "model_4.pt"))
+    assert os.listdir(tmp_path) == ["model_4.pt"]
+
+
+def test_a_checkpoint_with_other_hidden_sizes_is_one_line_naming_the_layer(tmp_path):
+    path = str(tmp_path / "model_0.pt")
+    small_runner(small_env(4)).save(path)
+    narrow = small_runner(small_env(4), actor=dataclasses.replace(MiniCheetahOscTrainCfg().actor, hidden_dims=(64, 32)))
+    with pytest.raises(runs.RunError, match=r"actor layer mlp.0.weight is \[256, 53\] there but \[64, 53\] here; "
+                                            r"likely cause: other train.actor.hidden_dims \(the checkpoint's: "
+                                            r"\[256, 256, 128\], configured: \[64, 32\]\)"):
+        narrow.load(path)
 
 
 def test_train_counts_completed_iterations_and_resumes_from_them(tmp_path):

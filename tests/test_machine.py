@@ -53,6 +53,9 @@ def test_expected_duration_rests_on_the_measured_cpu_rate():
     assert 5 < minutes < 20 and f"about {round(minutes)} min" in line and "12.8k env steps/s" in line
     assert re.search(r"about [4-9]\.\d h", expected_duration("cpu", "mujoco", 4096, 32, 2000))  # the paper on a CPU
     assert "no measured rate for cuda" in expected_duration("cuda", "warp", 4096, 32, 2000)
+    # Two torchrun processes on the CPU share its cores: twice the env steps, twice the time.
+    two = expected_duration("cpu", "mujoco", envs, steps, iterations, world_size=2)
+    assert f"about {round(2 * minutes)} min for {iterations} iterations x {2 * envs * steps:,} env steps" in two
 
 
 def test_a_run_says_what_it_chose_why_and_how_long_it_takes(tmp_path, capsys, monkeypatch):

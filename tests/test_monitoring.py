@@ -45,7 +45,8 @@ def _hide_package(monkeypatch, package):
 @pytest.mark.parametrize("argv, pattern", [
     (["--logger", "neptune"], r'--logger neptune needs the neptune package: pip install -e "\.\[neptune\]"$'),
     (["--logger", "wandb"], r'--logger wandb needs the wandb package: pip install -e "\.\[wandb\]"$'),
-    (["--set", "train.logger=mlflow"], r"logger 'mlflow' is unknown; choose one of tensorboard, wandb, neptune$"),
+    (["--set", "train.logger=mlflow"], r"config key 'train.logger' is 'mlflow'; allowed: one of tensorboard, wandb, "
+                                       r"neptune$"),
 ])
 def test_a_missing_logger_package_is_one_line_before_anything_is_written(argv, pattern, tmp_path, capsys,
                                                                           monkeypatch):

@@ -78,6 +78,6 @@ def test_resuming_with_other_settings_is_refused(tmp_path, capsys):
 
 @pytest.mark.parametrize("orc", ["12", "abc"])
 def test_bad_orc_is_one_line(tmp_path, capsys, orc):
-    assert sweep.main(["--out", str(tmp_path), "--orcs", orc]) == 1
-    assert "malformed ORC string" in capsys.readouterr().err
+    assert sweep.main(["--out", str(tmp_path), "--orcs", orc]) == 2
+    assert "is not an ORC string" in capsys.readouterr().err
     assert not os.listdir(tmp_path)
