@@ -276,10 +276,10 @@ def test_sigkill_during_saves_leaves_loadable_checkpoints_and_resume_cleans_up(t
                 if (tmp_path / "ORC_111").is_dir() and os.listdir(tmp_path / "ORC_111") else None
             names = os.listdir(run) if run else []
             if len(runs.list_checkpoints(run) if run else []) >= 3 and any(n.endswith(".tmp") for n in names):
-                proc.kill()
                 break
+        proc.kill()  # inside a save, or (on a slow machine) at the deadline: then this attempt does not count
         proc.wait(timeout=30)
-        left = [n for n in os.listdir(run) if n.endswith(".tmp")]
+        left = [n for n in os.listdir(run) if n.endswith(".tmp")] if run else []
         if left:
             break
         cmd += ["--run_name", f"attempt{attempt + 1}"]
