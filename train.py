@@ -192,7 +192,8 @@ def resolve(args: argparse.Namespace) -> Plan:
         key = item.partition("=")[0].strip()
         if key in ("env.device", "env.seed"):
             raise ConfigError(f"{key} follows --{key[4:]} (and the process rank under torchrun); pass --{key[4:]}")
-    env_cfg, train_cfg = apply_split_overrides(env_cfg, train_cfg, profile_overrides(defaults.profile) + args.overrides)
+    env_cfg, train_cfg = apply_split_overrides(env_cfg, train_cfg,
+                                               profile_overrides(defaults.profile, task) + args.overrides)
     if args.orc is not None and not hasattr(env_cfg, "osc"):
         raise ConfigError(f"--orc needs a task with oscillators; {task!r} has none")
     flags = {

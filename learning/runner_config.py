@@ -206,6 +206,7 @@ def train_cfg_class(task: str) -> type[TrainCfg]:
 class Profile:
     description: str
     overrides: tuple[str, ...] = ()  # same scheme as --set: 'train.'-prefixed keys are train keys
+    tasks: tuple[str, ...] = ()  # the tasks it applies to; empty: every task
 
 
 PROFILES: dict[str, Profile] = {
@@ -252,15 +253,20 @@ PROFILES["cpu_oscillators"] = Profile(
         "commands.zero_planar_prob=0.0",
         "osc.coupling_off_prob=0.5",
     ),
+    tasks=("mini_cheetah_osc",),
 )
 
 
-def profile_overrides(name: str | None) -> list[str]:
+def profile_overrides(name: str | None, task: str | None = None) -> list[str]:
     if not name:
         return []
     if name not in PROFILES:
         raise ConfigError(f"unknown profile {name!r}; known profiles: {', '.join(PROFILES)}")
-    return list(PROFILES[name].overrides)
+    profile = PROFILES[name]
+    if task is not None and profile.tasks and task not in profile.tasks:
+        raise ConfigError(f"profile {name!r} is for task {', '.join(profile.tasks)}, not {task!r}; "
+                          f"profiles for every task: {', '.join(n for n, p in PROFILES.items() if not p.tasks)}")
+    return list(profile.overrides)
 
 
 # --- overrides --------------------------------------------------------------------------------

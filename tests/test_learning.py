@@ -107,8 +107,12 @@ def test_train_config_yaml_round_trip(tmp_path):
 
 def test_every_profile_applies_to_every_task():
     for task in TRAIN_CFGS:
-        for name in PROFILES:
-            apply_split_overrides(env_cfg_class(task)(), train_cfg_class(task)(), profile_overrides(name))
+        for name, profile in PROFILES.items():
+            if profile.tasks and task not in profile.tasks:
+                with pytest.raises(ConfigError, match=f"profile '{name}' is for task"):
+                    profile_overrides(name, task)
+                continue
+            apply_split_overrides(env_cfg_class(task)(), train_cfg_class(task)(), profile_overrides(name, task))
     env, train = apply_split_overrides(env_cfg_class(TASK)(), MiniCheetahOscTrainCfg(), profile_overrides("cpu_fast"))
     assert env.env.num_envs == 1024 and train.num_steps_per_env == 24 and train.algorithm.learning_rate == 1e-3
     assert profile_overrides("paper") == []
