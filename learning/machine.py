@@ -13,11 +13,12 @@ import datetime
 import importlib.util
 from dataclasses import dataclass
 
-# Env steps per second of cpu_fast training, learning included, on the 2-core development machine:
-# the seven shipped policies (resources/policies/manifest.csv), 1850 iterations x 24576 steps in
-# 3542 s, 11.8k to 14.2k per run.
-CPU_FAST_STEPS_PER_S = 12_800
-CPU_REFERENCE = "the 2-core development machine's cpu_fast rate, 12.8k env steps/s"
+# Env steps per second of cpu_fast-sized training (1024 robots x 24 steps, [128, 128, 64]), learning and
+# checkpoints included, on the idle 2-core development machine: the recipe study's runs E4-E6
+# (docs/recipe-study.md), 350 iterations x 24576 steps in 442-492 s, 17.5k-19.5k. (The shipped
+# policies' manifest says 12.8k: those runs shared the machine with evaluations.)
+CPU_FAST_STEPS_PER_S = 18_500
+CPU_REFERENCE = "the idle 2-core development machine's cpu_fast rate, 18.5k env steps/s"
 CPU_PROFILE, GPU_PROFILE = "cpu_fast", "paper"
 
 

@@ -223,7 +223,7 @@ PROFILES: dict[str, Profile] = {
         "lr 1e-3 adaptive, lambda 0.95, forward-walking commands",
         (
             "env.num_envs=1024",
-            "train.max_iterations=300",  # the shipped policies walk after 250-350 (about 10 min on 2 cores)
+            "train.max_iterations=300",  # the shipped policies walk after 250-350 (about 7 min on 2 idle cores)
             "commands.lin_vel_x_choices=[0.0, 1.0, 2.0]",
             "commands.lin_vel_x_noise=0.3",
             "commands.lin_vel_y=[-0.3, 0.3]",
