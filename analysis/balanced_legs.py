@@ -84,9 +84,7 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     rows, identical = [], {}
     for policy, r in zip(policies, rollouts):
         g = mean_grf_per_leg(r.data["grf"])
-        # A policy that does not observe its phases moves every robot alike under deterministic evaluation.
-        same = bool(r.num_envs > 1 and np.ptp(g, axis=0).max() < 1e-6)
-        identical[policy.orc] = identical.get(policy.orc, True) and same
+        identical[policy.orc] = identical.get(policy.orc, True) and r.robots_alike()
         fell = r.fell()
         for i in range(r.num_envs):
             rows.append({"config": policy.orc, "run": policy.name, "robot": i, "fell": bool(fell[i]),

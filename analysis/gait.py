@@ -231,6 +231,21 @@ def gait_counts(labels, axis=0):
     return {g: np.sum(labels == g, axis=axis) for g in GAIT_LABELS}
 
 
+def label_shares(labels) -> dict[str, float]:
+    """Share of each label present in a 1-D array of labels (e.g. one per robot)."""
+    labels = np.asarray(labels)
+    return {str(g): float(np.mean(labels == g)) for g in sorted(set(labels.tolist()))}
+
+
+def mix_text(shares: dict[str, float], alike: bool = False) -> str:
+    """'pronk 56%, transition 44%' (largest first), or 'all robots alike: pronk' when the robots are
+    one sample repeated (Rollout.robots_alike)."""
+    if alike:
+        return "all robots alike: " + ", ".join(g for g, p in shares.items() if p > 0)
+    items = sorted(((p, g) for g, p in shares.items() if p > 0), reverse=True)
+    return ", ".join(f"{g} {p:.0%}" for p, g in items) or "-"
+
+
 def agreement(labels_a, labels_b, axis=None):
     """Share of entries on which two labellings (e.g. contact- and phase-based) agree."""
     return np.mean(np.asarray(labels_a) == np.asarray(labels_b), axis=axis)

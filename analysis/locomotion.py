@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.gait import CHECKPOINT_INTERVAL, TRANSITION, agreement, rpd_timeseries
+from analysis.gait import CHECKPOINT_INTERVAL, TRANSITION, agreement, label_shares, mix_text, rpd_timeseries
 from analysis.rollout import EvalSettings, eval_env_cfg, rollout
 
 
@@ -37,14 +37,6 @@ class LocomotionCheck:
                 f"(oscillators): {mix_text(self.oscillator_gaits)}, agreement {self.agreement:.0%}")
 
 
-def mix_text(shares: dict[str, float], identical: bool = False) -> str:
-    """'pronk 56%, transition 44%', or 'all robots alike: pronk' when the robots are one sample repeated."""
-    if identical:
-        return "all robots alike: " + ", ".join(g for g, p in shares.items() if p > 0)
-    items = sorted(((p, g) for g, p in shares.items() if p > 0), reverse=True)
-    return ", ".join(f"{g} {p:.0%}" for p, g in items) or "-"
-
-
 def check_locomotion(policy, env_cfg, command: float = 1.0, warmup_s: float = 2.0, measure_s: float = 10.0,
                      num_envs: int = 16, num_threads: int = 0, seed: int = 0) -> LocomotionCheck:
     if measure_s < CHECKPOINT_INTERVAL:
@@ -61,13 +53,9 @@ def check_locomotion(policy, env_cfg, command: float = 1.0, warmup_s: float = 2.
         tracking_error=float(np.mean(np.abs(vx.mean(axis=1) - command))),
         mean_velocity=float(vx.mean()),
         falls=int(result.data["terminated"].any(axis=1).sum()),
-        gaits=_shares(labels),
+        gaits=label_shares(labels),
         num_envs=num_envs,
-        oscillator_gaits=_shares(by_phase),
+        oscillator_gaits=label_shares(by_phase),
         agreement=float(agreement(labels, by_phase)),
-        identical=bool(num_envs > 1 and np.ptp(result.data["grf"], axis=0).max() < 1e-6),
+        identical=result.robots_alike(),
     )
-
-
-def _shares(labels) -> dict[str, float]:
-    return {str(g): float(np.mean(labels == g)) for g in sorted(set(labels))}

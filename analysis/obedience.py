@@ -28,7 +28,6 @@ from pathlib import Path
 import numpy as np
 
 from analysis import gait
-from analysis.locomotion import mix_text
 from analysis.plotting import COLUMN_WIDTH, GAIT_COLORS, paper_style, save_figure, sort_configs
 from analysis.rollout import EvalSettings, Job, PolicyRun, cli_main, run_jobs
 
@@ -90,14 +89,9 @@ class Obedience:
         if self.settling is not None:
             st = self.settling
             text += (f" | sigma=1: regular at 10 s {100 * st.regular_at_10s:.0f}%, final "
-                     f"{mix_text(st.mix[-1], st.identical)}, median settle {st.median_settle_s:g} s, falls {st.falls}, "
+                     f"{gait.mix_text(st.mix[-1], st.identical)}, median settle {st.median_settle_s:g} s, falls {st.falls}, "
                      f"GRF shares {'/'.join(f'{x:.2f}' for x in st.leg_shares)}")
         return text
-
-
-def _identical(rollout) -> bool:
-    grf = rollout.data["grf"]
-    return bool(len(grf) > 1 and np.ptp(grf, axis=0).max() < 1e-6)
 
 
 def _forward_velocity(rollout) -> np.ndarray:
@@ -120,7 +114,7 @@ def started_gait_result(rollout, started: str) -> StartedGait:
         velocity=float(_forward_velocity(rollout).mean()),
         stance_share=float(np.nanmean(gait.stance_share(phase, grf))),
         falls=int(rollout.fell().sum()),
-        identical=_identical(rollout),
+        identical=rollout.robots_alike(),
     )
 
 
@@ -152,7 +146,7 @@ def coupled_settling_result(rollout) -> CoupledSettling:
         velocity_error=float(np.mean(np.abs(_forward_velocity(rollout) - COMMAND))),
         leg_shares=[float(x) for x in np.mean(per_leg / per_leg.sum(axis=1, keepdims=True), axis=0)],
         falls=int(rollout.fell().sum()),
-        identical=_identical(rollout),
+        identical=rollout.robots_alike(),
     )
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis import balanced_legs, disturbance, fixed_points, gait_emergence, obedience, pace_to_trot
+from analysis import balanced_legs, disturbance, fixed_points, gait, gait_emergence, obedience, pace_to_trot
 from gym_envs.config import ConfigError
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
 from analysis.plotting import LEG_NAMES, sort_configs
@@ -93,11 +93,6 @@ def _fmt(x, digits: int = 2, unit: str = "") -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "–"
     return f"{x:.{digits}f}{unit}"
-
-
-def _shares(fractions: dict) -> str:
-    items = sorted(fractions.items(), key=lambda kv: -kv[1])
-    return ", ".join(f"{g} {100 * p:.0f} %" for g, p in items if p > 0) or "–"
 
 
 def _git_commit() -> str:
@@ -261,7 +256,7 @@ def _section_emergence(ge: dict) -> list[str]:
         ended_in_gaits = 1.0 - e["final_fractions"].get("transition", 1.0)
         settling = _fmt(e["settling_time_s"], 0, " s") if ended_in_gaits >= 0.5 else "– (mostly Transition)"
         rows.append([key.replace("_sigma", ", σ = "), e["policy"], settling,
-                     PAPER_SETTLING.get(key, "–"), _shares(e["initial_fractions"]), _shares(e["final_fractions"]),
+                     PAPER_SETTLING.get(key, "–"), gait.mix_text(e["initial_fractions"]), gait.mix_text(e["final_fractions"]),
                      PAPER_FINAL_GAITS.get(key, "–"), _fmt(e["median_initial_final_distance"]),
                      f"{100 * e['contact_phase_label_agreement']:.0f} %", e["falls"]])
     md += [markdown_table(["experiment", "policy", "settling", "paper settling", "initial gaits", "final gaits",
@@ -306,7 +301,7 @@ def _section_obedience(ob: dict) -> list[str]:
         rows.append([r.orc, r.policy, obeyed,
                      " / ".join(f"{100 * x.stance_share:.0f} %" for x in started),
                      f"{100 * np.mean([x.phase_agreement for x in started]):.0f} %",
-                     f"{100 * st.regular_at_10s:.0f} %", _shares(st.mix[-1]), _fmt(st.median_settle_s, 0, " s"),
+                     f"{100 * st.regular_at_10s:.0f} %", gait.mix_text(st.mix[-1], st.identical), _fmt(st.median_settle_s, 0, " s"),
                      " / ".join(f"{x:.2f}" for x in st.leg_shares), sum(x.falls for x in started) + st.falls])
     md += [markdown_table(["ORC", "policy", "walks started trot / pace / bound / pronk (v [m/s])",
                            "GRF in stance half", "contact/oscillator agreement", "σ = 1: regular at 10 s",

@@ -255,6 +255,12 @@ class Rollout:
         """(N,) robots that terminated at least once in the recorded window."""
         return self.data["terminated"].any(axis=1)
 
+    def robots_alike(self, signal: str = "grf") -> bool:
+        """Every robot recorded the same signal: a policy that does not observe its oscillator phases
+        moves all robots alike under the deterministic evaluation, so they are one sample, repeated."""
+        x = self.data[signal]
+        return bool(len(x) > 1 and np.ptp(x, axis=0).max() < 1e-6)
+
     def rows(self, index) -> Rollout:
         """The same rollout restricted to some robots."""
         return dataclasses.replace(

@@ -2,8 +2,9 @@
 
 A fixed command that is never resampled, no time-outs, and every training randomness off unless
 asked for: observation noise, oscillator noise (process noise and the omega/sigma jitter), pushes,
-domain randomisation with randomised resets, and episodes drawn without coupling. Returned as `section.key=value` overrides so a
-run's saved config turns into its evaluation config with `gym_envs.config.apply_overrides`.
+domain randomisation with randomised resets, and episodes drawn without coupling. Returned as
+`section.key=value` overrides so a run's saved config turns into its evaluation config with
+`gym_envs.config.apply_overrides`.
 """
 
 from __future__ import annotations

@@ -28,7 +28,8 @@ import sys
 import yaml
 
 from analysis import obedience
-from analysis.locomotion import check_locomotion, mix_text
+from analysis.gait import mix_text
+from analysis.locomotion import check_locomotion
 from analysis.rollout import load_policy_run
 from gym_envs.orc import PAPER_CONFIGURATIONS
 from learning import runs
