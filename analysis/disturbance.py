@@ -18,7 +18,7 @@ Magnitudes are simulated side by side in one batch, each on fresh robots (the re
 them one after another on the same robots; fresh starts are the cleaner choice the protocol
 allows).
 
-Usage: python -m analysis.disturbance --runs DIR --out DIR [--quick]
+Usage: python -m analysis.disturbance --runs DIR --out DIR [--quick] [--push_slots N]
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from __future__ import annotations
 import csv
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +99,12 @@ PROTOCOL_BALL = PushBall()
 QUICK_BALL = PushBall(slots=4, directions=8, direction_mode="even", settle_s=2.0, test_s=2.5, push_at_s=0.5)
 
 
+def default_ball(quick: bool, slots: int | None = None) -> PushBall:
+    """The protocol's (or --quick's) ball, with `slots` push slots per direction when given."""
+    ball = QUICK_BALL if quick else PROTOCOL_BALL
+    return ball if slots is None else replace(ball, slots=slots)
+
+
 # --- scoring --------------------------------------------------------------------------------------
 
 
@@ -158,17 +164,21 @@ def format_failure_table(rates: dict, magnitudes=None, configs=None, bold_lowest
 
 
 def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-        magnitudes=None, ball: PushBall | None = None, max_batch: int = DEFAULT_MAX_BATCH,
-        progress: bool = True) -> dict:
-    """Push-ball every policy at every magnitude; write CSVs, Table I (markdown) and figures."""
+        magnitudes=None, ball: PushBall | None = None, push_slots: int | None = None,
+        max_batch: int = DEFAULT_MAX_BATCH, progress: bool = True) -> dict:
+    """Push-ball every policy at every magnitude; write CSVs, Table I (markdown) and figures.
+
+    `push_slots` resizes the default ball to that many slots per direction: fewer robots, the same
+    directions, magnitudes and timing.
+    """
     if not policies:
         raise ValueError("disturbance needs at least one policy")
     magnitudes = tuple(magnitudes or (QUICK_MAGNITUDES if quick else MAGNITUDES))
-    ball = ball or (QUICK_BALL if quick else PROTOCOL_BALL)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    ball = ball or default_ball(quick, push_slots)
     dt = 1.0 / policies[0].env_cfg.control.frequency_hz
     tl = ball.timeline(dt)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
 
     jobs = []
     for p in policies:
@@ -290,7 +300,7 @@ def plot_velocity(vel: dict, dt: float, push_window, magnitude: float, command: 
 
 
 def main(argv=None) -> int:
-    return cli_main("analysis.disturbance", __doc__, run, argv)
+    return cli_main("analysis.disturbance", __doc__, run, argv, pushes=True)
 
 
 if __name__ == "__main__":

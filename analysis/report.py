@@ -4,7 +4,7 @@ Runs are grouped by their ORC configuration (osc.orc of each run's env.yaml). Wi
 shipped policies (resources/policies/ORC_<xyz>/) are used. --quick uses the reduced sizes of every
 module (a smoke test of the pipeline: its numbers are not comparable with the paper's).
 
-Usage: python -m analysis.report --runs DIR --out DIR [--quick]
+Usage: python -m analysis.report --runs DIR --out DIR [--quick] [--push_slots N]
 """
 
 from __future__ import annotations
@@ -137,11 +137,13 @@ def table_claims(stats: dict) -> list[str]:
 
 
 def build(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-          source: str = "", progress: bool = True) -> dict:
+          source: str = "", progress: bool = True, push_slots: int | None = None) -> dict:
     """Run every analysis on `policies` (PolicyRun list) and write the figures, CSVs and report.md."""
     policies = [p for p in policies if p.task == DEFAULT_TASK]
     if not policies:
         raise ValueError(f"no {DEFAULT_TASK} runs (env.yaml with osc.orc) to analyse")
+    # A push ball that does not fit its test window fails now, not after half an hour of other analyses.
+    disturbance.default_ball(quick, push_slots).timeline(1.0 / policies[0].env_cfg.control.frequency_hz)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     started = datetime.datetime.now()
@@ -157,7 +159,7 @@ def build(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalS
         pt = {"files": {}, "skipped": "no ORC(111) policy among the runs"}
     del collected
     ob = obedience.run(policies, out, quick, settings, seed, progress=progress)
-    db = disturbance.run(policies, out, quick, settings, seed, progress=progress)
+    db = disturbance.run(policies, out, quick, settings, seed, push_slots=push_slots, progress=progress)
 
     results = {"fixed_points": fp, "balanced_legs": bl, "gait_emergence": ge, "pace_to_trot": pt,
                "obedience": ob, "disturbance": db}
@@ -345,7 +347,7 @@ def _section_fixed_points(fp: dict) -> list[str]:
 def main(argv=None) -> int:
     from learning import cli
 
-    parser = build_parser("analysis.report", __doc__, out_default="report")
+    parser = build_parser("analysis.report", __doc__, out_default="report", pushes=True)
 
     def body(args) -> int:
         policies = runs_from_args(args)
@@ -353,7 +355,7 @@ def main(argv=None) -> int:
             raise ConfigError(f"no {DEFAULT_TASK} runs (env.yaml with osc.orc) in {args.runs or 'the shipped policies'}")
         source = f"runs in {args.runs}" if args.runs else "shipped policies (resources/policies)"
         result = build(policies, args.out, quick=args.quick, seed=args.seed, source=source,
-                       settings=EvalSettings(process_noise_std=args.process_noise))
+                       settings=EvalSettings(process_noise_std=args.process_noise), push_slots=args.push_slots)
         print(f"report: {result['report']}")
         return 0
 

@@ -440,8 +440,8 @@ def _stack_pushes(jobs: Sequence[Job]):
 # --- command line shared by the analysis modules ---------------------------------------------------
 
 
-def build_parser(prog: str, description: str, out_default: str | None = None):
-    """The flags every analysis module takes (learning.cli's style and checks)."""
+def build_parser(prog: str, description: str, out_default: str | None = None, pushes: bool = False):
+    """The flags every analysis module takes (learning.cli's style and checks); `pushes` adds Table I's size."""
     from learning import cli
 
     parser = cli.Parser(prog, description)
@@ -455,6 +455,11 @@ def build_parser(prog: str, description: str, out_default: str | None = None):
     parser.add_argument("--process_noise", type=cli.number(0.0), default=0.0,
                         help="oscillator process noise [Hz] at evaluation (released scripts: 0.25)")
     parser.add_argument("--seed", type=cli.integer(0), default=0)
+    if pushes:
+        parser.add_argument("--push_slots", type=cli.integer(1), default=None,
+                            help="Table I's push slots per direction (protocol: 50, i.e. 1800 robots per policy "
+                                 "and impulse; 4 with --quick); 10 fits seven policies into about a quarter of "
+                                 "an hour on 2 cores")
     return parser
 
 
@@ -466,19 +471,21 @@ def runs_from_args(args) -> list[PolicyRun]:
     return limit_per_config(load_runs(args.runs), limit)
 
 
-def cli_main(prog: str, description: str, run_fn, argv=None) -> int:
+def cli_main(prog: str, description: str, run_fn, argv=None, pushes: bool = False) -> int:
     """`python -m analysis.<module>`: load the runs, call run_fn(runs, out, quick, settings, seed), print paths.
 
-    Errors take learning.cli's one error path: one line on stderr, no traceback (unless --debug).
+    With `pushes`, --push_slots is offered and handed to run_fn as `push_slots`. Errors take learning.cli's
+    one error path: one line on stderr, no traceback (unless --debug).
     """
     from learning import cli
 
-    parser = build_parser(prog, description)
+    parser = build_parser(prog, description, pushes=pushes)
 
     def body(args) -> int:
         runs = runs_from_args(args)
         settings = EvalSettings(process_noise_std=args.process_noise)
-        summary = run_fn(runs, args.out, quick=args.quick, settings=settings, seed=args.seed)
+        extra = {"push_slots": args.push_slots} if pushes else {}
+        summary = run_fn(runs, args.out, quick=args.quick, settings=settings, seed=args.seed, **extra)
         for key, value in summary.get("files", {}).items():
             print(f"{key}: {value}")
         return 0

@@ -62,6 +62,17 @@ def test_push_ball_timeline_and_layout_match_the_protocol():
     assert np.diff(even) == pytest.approx(np.full(35, PI / 18))
 
 
+def test_fewer_push_slots_keep_the_directions_and_the_timing():
+    ball = disturbance.default_ball(quick=False, slots=10)
+    assert ball.robots == 360 and ball.directions == disturbance.PROTOCOL_BALL.directions
+    small, full = ball.timeline(0.01), disturbance.PROTOCOL_BALL.timeline(0.01)
+    assert small["last_push"] == full["first_push"] + 9
+    assert {k: v for k, v in small.items() if k != "last_push"} == {k: v for k, v in full.items() if k != "last_push"}
+    assert disturbance.default_ball(quick=True) is disturbance.QUICK_BALL
+    with pytest.raises(ValueError, match="do not fit"):
+        disturbance.default_ball(quick=False, slots=2000).timeline(0.01)
+
+
 def test_mean_std_is_population_std():
     mean, std = disturbance.mean_std([0.0, 2.0])
     assert (mean, std) == (1.0, 1.0)

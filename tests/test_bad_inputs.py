@@ -136,6 +136,8 @@ ANALYSIS_FLAGS = {
     "--process_noise": [["--process_noise", "-1"], ["--process_noise", "nan"]],
     "--seed": [["--seed", "-1"]],
 }
+PUSH_FLAGS = {**ANALYSIS_FLAGS, "--push_slots": [["--push_slots", "0"], ["--push_slots", "100000"]]}  # too many to fit
+PUSHING = {"analysis.report", "analysis.disturbance"}
 FIXED_POINTS_FLAGS = {"--debug": bool_flag("--debug"), "--out": [["--out", "a_file"]], "--quick": bool_flag("--quick")}
 
 SCRIPTS = {
@@ -145,7 +147,8 @@ SCRIPTS = {
                                                  "--num_threads", "1"], PLAY_FLAGS),
     "sweep.py": (sweep.main, sweep.build_parser(), ["--orcs", "111", "--num_threads", "1", "--out", "sweep"],
                  SWEEP_FLAGS),
-    **{name: (module.main, build_parser(name, ""), ["--out", "out"], ANALYSIS_FLAGS)
+    **{name: (module.main, build_parser(name, "", pushes=name in PUSHING), ["--out", "out"],
+              PUSH_FLAGS if name in PUSHING else ANALYSIS_FLAGS)
        for name, module in ANALYSIS.items()},
     "analysis.fixed_points": (fixed_points.main, fixed_points.build_parser(), [], FIXED_POINTS_FLAGS),
 }
