@@ -39,8 +39,9 @@ built or written; a bad one is one line on stderr naming it and what is allowed 
 2 for a malformed flag). --debug shows the traceback of any error.
 
 Defaults that fit the machine (learning/machine.py). Without --device the run uses CUDA when torch
-sees a device, else the CPU; without --profile it trains the paper's settings on CUDA and the CPU
-recipe cpu_fast (1024 robots x 24 steps, 300 iterations) on the CPU; without --sim it simulates with
+sees a device, else the CPU; without --profile it trains the paper's settings on CUDA and a CPU recipe
+on the CPU (1024 robots x 24 steps: cpu_oscillators, 350 iterations, for mini_cheetah_osc, under which
+ORC-111 follows its oscillators; cpu_fast, 300 iterations, for other tasks); without --sim it simulates with
 MuJoCo Warp on CUDA when the gpu extra is installed. The first lines of a run say what was chosen,
 why, the expected duration (for the CPU, from the rate measured on a 2-core machine) and the flag
 that picks the other settings. A resumed run keeps its own profile and physics.
@@ -98,8 +99,9 @@ def build_parser() -> cli.Parser:
     cli.add_run_selection(p, "resume")
     p.add_argument("--run_name", type=cli.name, help="suffix of the run folder name (default seed<seed>)")
     cli.add_compute(p)
-    p.add_argument("--profile", help="named override set from learning.runner_config.PROFILES: paper, cpu_fast "
-                   "(default: paper on cuda, cpu_fast on cpu; a resumed run keeps its own)")
+    p.add_argument("--profile", help="named override set from learning.runner_config.PROFILES: paper, cpu_fast, "
+                   "cpu_oscillators (default: paper on cuda; on cpu cpu_oscillators for mini_cheetah_osc, else "
+                   "cpu_fast; a resumed run keeps its own)")
     cli.add_overrides(p, "config override, repeatable: train.<key> for the train config, other keys for the env "
                          "config")
     p.add_argument("--logger", choices=("tensorboard", "wandb", "neptune"),
@@ -167,7 +169,7 @@ def resolve(args: argparse.Namespace) -> Plan:
     # The machine's defaults decide cpu or cuda; under torchrun each process takes cuda:<local rank>,
     # and the process group's backend follows (gloo on CPU, NCCL on CUDA).
     defaults = choose_defaults(args.device, args.profile, args.sim, cuda_available=_cuda_available(),
-                               warp_available=warp_installed(), resume=args.resume)
+                               warp_available=warp_installed(), resume=args.resume, task=args.task)
     device = distributed.resolve_device(defaults.device, ranks)
     distributed.init_process_group(device, ranks)
 

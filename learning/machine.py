@@ -1,7 +1,8 @@
 """Training defaults that fit the machine, and what a run should expect to take.
 
 Without --device, --profile and --sim a run picks: CUDA when torch sees a device, else the CPU; the
-paper's settings on CUDA and the CPU recipe `cpu_fast` on the CPU; MuJoCo Warp physics on CUDA when
+paper's settings on CUDA and a CPU recipe on the CPU (`cpu_oscillators` for the oscillator task, under
+which ORC-111 follows its oscillators; `cpu_fast` for the others); MuJoCo Warp physics on CUDA when
 the `gpu` extra is installed, else MuJoCo's CPU batch. A resumed run keeps its own profile and
 physics. `choose_defaults` is pure (the caller says whether CUDA and Warp are there), so it is
 tested without either.
@@ -20,6 +21,13 @@ from dataclasses import dataclass
 CPU_FAST_STEPS_PER_S = 18_500
 CPU_REFERENCE = "the idle 2-core development machine's cpu_fast rate, 18.5k env steps/s"
 CPU_PROFILE, GPU_PROFILE = "cpu_fast", "paper"
+# cpu_fast trains ORC-111 to pronk whatever its oscillators say (docs/recipe-study.md).
+CPU_PROFILE_OF_TASK = {"mini_cheetah_osc": "cpu_oscillators"}
+
+
+def cpu_profile(task: str | None) -> str:
+    """The CPU recipe of a task."""
+    return CPU_PROFILE_OF_TASK.get(task, CPU_PROFILE)
 
 
 @dataclass(frozen=True)
@@ -43,15 +51,16 @@ def warp_installed() -> bool:
 
 
 def choose_defaults(device: str | None, profile: str | None, sim: str | None, *, cuda_available: bool,
-                    warp_available: bool, resume: bool = False) -> RunDefaults:
+                    warp_available: bool, resume: bool = False, task: str | None = None) -> RunDefaults:
     """Fill in what the command line left open; the flags given always win."""
     reasons = []
     if device is None:
         device = "cuda" if cuda_available else "cpu"
         reasons.append("torch sees a CUDA device" if cuda_available else "torch sees no CUDA device")
     if profile is None and not resume:
-        profile = GPU_PROFILE if device == "cuda" else CPU_PROFILE
-        reasons.append("cpu_fast is the CPU recipe" if profile == CPU_PROFILE else "the paper's settings suit a GPU")
+        profile = GPU_PROFILE if device == "cuda" else cpu_profile(task)
+        reasons.append("the paper's settings suit a GPU" if profile == GPU_PROFILE
+                       else f"{profile} is the CPU recipe" + (f" of {task}" if task in CPU_PROFILE_OF_TASK else ""))
     if sim is None and not resume and device == "cuda":
         sim = "warp" if warp_available else "mujoco"
         reasons.append("MuJoCo Warp is installed" if warp_available
@@ -61,7 +70,7 @@ def choose_defaults(device: str | None, profile: str | None, sim: str | None, *,
     if resume:
         alternative = "--device cpu or cuda picks the device"
     elif device == "cuda":
-        alternative = "--device cpu for the CPU recipe (profile cpu_fast)"
+        alternative = f"--device cpu for the CPU recipe (profile {cpu_profile(task)})"
     else:
         alternative = "--profile paper for the paper's settings (4096 robots x 32 steps, 2000 iterations)"
     return RunDefaults(device, profile, sim, tuple(reasons), alternative)

@@ -20,6 +20,15 @@ def test_a_cpu_only_machine_gets_the_cpu_recipe_and_is_told_how_to_get_the_paper
     assert "--profile paper" in line
 
 
+def test_the_oscillator_task_gets_the_recipe_under_which_policies_follow_their_oscillators():
+    d = choose_defaults(None, None, None, cuda_available=False, warp_available=False, task="mini_cheetah_osc")
+    assert d.profile == "cpu_oscillators" and "cpu_oscillators is the CPU recipe of mini_cheetah_osc" in d.describe("mujoco")
+    assert choose_defaults(None, None, None, cuda_available=False, warp_available=False,
+                           task="mini_cheetah").profile == "cpu_fast"
+    d = choose_defaults(None, None, None, cuda_available=True, warp_available=True, task="mini_cheetah_osc")
+    assert d.profile == "paper" and "(profile cpu_oscillators)" in d.describe("warp")
+
+
 @pytest.mark.parametrize("warp, sim", [(True, "warp"), (False, "mujoco")])
 def test_a_cuda_machine_gets_the_papers_settings_and_warp_when_installed(warp, sim):
     d = choose_defaults(None, None, None, cuda_available=True, warp_available=warp)
@@ -64,9 +73,10 @@ def test_a_run_says_what_it_chose_why_and_how_long_it_takes(tmp_path, capsys, mo
                        "--num_threads", "1", "--max_iterations", "1", "--set", "train.num_steps_per_env=4"])
     assert code == 0
     first = capsys.readouterr().out.splitlines()[:2]
-    assert first[0].startswith("settings: device cpu, profile cpu_fast, physics mujoco (torch sees no CUDA device; cpu_fast is")
+    assert first[0].startswith("settings: device cpu, profile cpu_oscillators, physics mujoco (torch sees no CUDA device; "
+                               "cpu_oscillators is")
     assert first[1].startswith("expected duration: about 1 s for 1 iterations x 64 env steps")
     (experiment,) = os.listdir(tmp_path)
     (run,) = os.listdir(tmp_path / experiment)
     saved = (tmp_path / experiment / run / "train.yaml").read_text()
-    assert "profile: cpu_fast" in saved and "[128, 128, 64]" in saved  # the recipe's networks, the explicit flags on top
+    assert "profile: cpu_oscillators" in saved and "[128, 128, 64]" in saved  # the recipe's networks, the flags on top
