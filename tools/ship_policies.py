@@ -11,7 +11,7 @@ Each shipped policy is then measured at 1 m/s in the evaluation setting:
     oscillator phases, with their agreement;
   - obedience: sigma = 0, oscillators started in trot / pace / bound / pronk, 16 robots each, share
     walking that gait at 10 s; sigma = 1 from random phases, 16 robots, share in a regular gait at
-    10 s (analysis.obedience).
+    10 s, and each leg's share of the GRF there (RF/LF/RH/LH) (analysis.obedience).
 resources/policies/manifest.csv records configuration, command, commit, seed, iterations, wall time,
 the machine that trained it and the measured metrics.
 """
@@ -37,7 +37,7 @@ from learning import runs
 PROVENANCE = ("orc", "command_mps", "commit", "seed", "iterations", "wall_time_s", "machine", "profile")
 METRICS = ("tracking_error_mps", "mean_velocity_mps", "falls", "robots", "gaits_contacts", "gaits_oscillators",
            "gait_label_agreement", "robots_alike", *(f"obeys_{g}" for g in obedience.STARTED_GAITS),
-           "sigma1_regular_at_10s")
+           "sigma1_regular_at_10s", "sigma1_grf_shares")
 FIELDS = PROVENANCE + METRICS
 ROBOTS = 16
 
@@ -59,6 +59,7 @@ def measure(policy_dir: str, num_threads: int) -> dict:
         "robots_alike": int(check.identical),
         **{f"obeys_{g}": round(s.obeyed, 3) for g, s in obeyed.started.items()},
         "sigma1_regular_at_10s": round(obeyed.settling.regular_at_10s, 3),
+        "sigma1_grf_shares": "/".join(f"{x:.2f}" for x in obeyed.settling.leg_shares),
     }
 
 
