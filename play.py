@@ -22,7 +22,7 @@ train.yaml) and changed for evaluation:
     keeps the trained values);
   * pushes off (--pushes keeps them); friction/mass/COM randomisation off and resets to the
     default pose at rest (--randomize keeps the trained randomisation and reset ranges);
-  * --osc_init sets the initial phases (random, trot, pace, bound, pronk, standing);
+  * --osc_init sets the initial phases (random, trot, pace, bound, pronk, any_gait, standing);
   * --coupling off sets osc.coupling_max = 0 (the moving coupling; the ORC string is unchanged);
     --orc, given for a run, evaluates the policy under another ORC string (its O bit must match);
   * --set KEY=VALUE changes any other env key (e.g. --set osc.coupling_max=0.5).
@@ -59,6 +59,7 @@ from typing import Any  # noqa: E402
 
 from gym_envs.config import ConfigError  # noqa: E402
 from gym_envs.evaluation import evaluation_overrides  # noqa: E402
+from gym_envs.oscillators import PHASE_INIT_MODES  # noqa: E402
 from learning import cli  # noqa: E402
 
 DEFAULT_DURATION_S = 10.0
@@ -78,7 +79,7 @@ def build_parser() -> cli.Parser:
                    help=f"simulated seconds (default {DEFAULT_DURATION_S:g}; in the viewer, until the window closes)")
     p.add_argument("--command", type=cli.number(), nargs="+", metavar="V", default=[1.0, 0.0, 0.0],
                    help="VX [VY YAW]: fixed body-frame command (default 1 0 0)")
-    p.add_argument("--osc_init", choices=("random", "trot", "pace", "bound", "pronk", "standing"),
+    p.add_argument("--osc_init", choices=PHASE_INIT_MODES,
                    help="initial oscillator phases (default: the run's, i.e. random)")
     p.add_argument("--coupling", choices=("on", "off"), help="off: osc.coupling_max=0 (default: as trained)")
     p.add_argument("--noise", action="store_true", help="keep observation/oscillator noise and jitter")

@@ -45,6 +45,9 @@ class OscillatorCfg:
     # Share of training episodes run with sigma = 0 throughout (standing too): those robots keep
     # whatever phase offsets they start with, so the policy keeps seeing every relative phase.
     coupling_off_prob: float = 0.0
+    # How those episodes start their oscillators ('any_gait': one of the four ideal gaits, so the rarely
+    # held ones, pace above all, get a fair share of the uncoupled data); coupled episodes use `init`.
+    uncoupled_init: str = "random"
     stand_threshold: float = 0.5  # |v_x| below this uses the standing parameters
     # Quirk switches of the released code, off by default:
     hold_grf: bool = False  # integrate all substeps with the previous control step's last force
@@ -63,6 +66,7 @@ class MiniCheetahOscCfg(MiniCheetahCfg):
         "osc.coupling_noise_std": NON_NEGATIVE,
         "osc.coupling_max": NON_NEGATIVE,
         "osc.coupling_off_prob": SHARE,
+        "osc.uncoupled_init": OneOf(oscillators.PHASE_INIT_MODES),
         "osc.stand_threshold": NON_NEGATIVE,
         "osc.grf_normaliser_mass": NON_NEGATIVE,
     }
@@ -202,6 +206,11 @@ class MiniCheetahOsc(MiniCheetah):
         if self.cfg.osc.coupling_off_prob > 0.0:
             draw = torch.rand(len(env_ids), 1, generator=self.generator, device=self.device)
             self.coupling_on[env_ids] = (draw >= self.cfg.osc.coupling_off_prob).float()
+            if self.cfg.osc.uncoupled_init != self.cfg.osc.init:
+                uncoupled = env_ids[self.coupling_on[env_ids, 0] == 0.0]
+                self.phase[uncoupled] = oscillators.initial_phases(
+                    len(uncoupled), self.cfg.osc.uncoupled_init, generator=self.generator, device=self.device
+                )
 
     def _log_episodes(self, env_ids: torch.Tensor) -> None:
         super()._log_episodes(env_ids)

@@ -36,8 +36,8 @@ IDEAL_RPD = {
     "bound": (0.0, math.pi, math.pi),
     "pronk": (0.0, 0.0, 0.0),
 }
-PHASE_INIT_MODES = ("random", "trot", "pace", "bound", "pronk", "standing")
 GAIT_NAMES = tuple(IDEAL_RPD)
+PHASE_INIT_MODES = ("random", *GAIT_NAMES, "any_gait", "standing")
 # Farther than this (wrapped Euclidean distance in RPD space) from every ideal gait is a transition.
 TRANSITION_DISTANCE = 2.0
 
@@ -168,7 +168,8 @@ def initial_phases(
     """Initial phases (num_envs, 4) in [0, 2*pi).
 
     'random': i.i.d. U[0, 2*pi) per leg. 'trot'/'pace'/'bound'/'pronk': a random common phase for
-    RF plus the ideal relative phases (phi_j = phi_RF - RPD_j). 'standing': all legs at 3*pi/2.
+    RF plus the ideal relative phases (phi_j = phi_RF - RPD_j). 'any_gait': each robot one of those
+    four, uniformly. 'standing': all legs at 3*pi/2.
     """
     if mode not in PHASE_INIT_MODES:
         raise ValueError(f"unknown phase init mode {mode!r}; valid modes: {', '.join(PHASE_INIT_MODES)}")
@@ -177,7 +178,13 @@ def initial_phases(
     if mode == "random":
         phase = TWO_PI * _rand((num_envs, 4), dtype, generator)
     else:
-        rel = torch.tensor((0.0,) + IDEAL_RPD[mode], dtype=dtype)
+        ideal = torch.tensor([(0.0,) + IDEAL_RPD[g] for g in GAIT_NAMES], dtype=dtype)
+        if mode == "any_gait":
+            which = torch.randint(len(GAIT_NAMES), (num_envs,), generator=generator,
+                                  device=generator.device if generator is not None else None)
+            rel = ideal[which.cpu()]
+        else:
+            rel = ideal[GAIT_NAMES.index(mode)]
         phase = TWO_PI * _rand((num_envs, 1), dtype, generator) - rel
         phase = torch.remainder(phase, TWO_PI)
         phase = torch.where(phase >= TWO_PI, phase - TWO_PI, phase)

@@ -279,6 +279,12 @@ def test_initial_phases_modes(mode):
         assert torch.allclose(phase, torch.full_like(phase, 1.5 * math.pi))
     elif mode == "random":
         assert phase.std(dim=0).min() > 1.5  # U[0, 2pi) has std 1.81
+    elif mode == "any_gait":
+        rpd = torch.remainder(phase[:, :1] - phase[:, 1:], TWO_PI)
+        errors = torch.stack([_wrapped_error(rpd, torch.tensor(ideal)).amax(dim=1) for ideal in _IDEAL.values()], dim=1)
+        assert errors.min(dim=1).values.max() < 1e-5  # every robot starts in an ideal gait
+        counts = torch.bincount(errors.argmin(dim=1), minlength=4)
+        assert counts.min() > 500 / 4 * 0.7  # and all four are drawn about equally often
     else:
         rpd = torch.remainder(phase[:, :1] - phase[:, 1:], TWO_PI)  # RPD_j = phi_RF - phi_j
         assert _wrapped_error(rpd, torch.tensor(_IDEAL[mode])).max() < 1e-5

@@ -6,7 +6,7 @@ import warnings
 import pytest
 import torch
 
-from gym_envs import ConfigError, UnknownTaskError, env_cfg_class, make_env
+from gym_envs import ConfigError, UnknownTaskError, env_cfg_class, make_env, oscillators
 from gym_envs.config import apply_overrides
 from gym_envs.legged_robot import sample_commands
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
@@ -101,6 +101,18 @@ def test_coupling_off_share_of_episodes():
     first = env.coupling_on.clone()
     env._reset_task_state(torch.arange(256))
     assert not torch.equal(first, env.coupling_on)  # redrawn at every reset
+
+
+def test_uncoupled_episodes_can_start_in_ideal_gaits_while_coupled_ones_keep_random_phases():
+    env = osc_env(512, ["osc.uncoupled_init=any_gait"], orc="111", coupling_off_prob=0.5)
+    env._reset_task_state(torch.arange(512))
+    off = env.coupling_on[:, 0] == 0.0
+    labels, _ = oscillators.classify_rpd(oscillators.relative_phases(env.phase))
+    transition = len(oscillators.GAIT_NAMES)
+    assert torch.all(labels[off] != transition)  # every uncoupled robot holds an ideal gait
+    shares = torch.bincount(labels[off], minlength=transition + 1).float() / off.sum()
+    assert shares[:transition].min() > 0.15  # all four, about a quarter each
+    assert (labels[~off] == transition).float().mean() > 0.3  # uniform phases: about 46 % transition
 
 
 def test_oscillator_gait_mix_is_logged():
