@@ -1,6 +1,6 @@
 """Wall-clock minutes until mini_cheetah_osc ORC-111 walks, and until it obeys its oscillators.
 
-Trains ORC-111 with `--profile` (default cpu_fast) and, every `--eval_every` iterations, pauses the
+Trains ORC-111 with `--profile` (default cpu_oscillators, the CPU recipe of the task) and, every `--eval_every` iterations, pauses the
 clock and evaluates the current deterministic policy in the analysis evaluation setting (no noise,
 pushes or randomisation), at a 1 m/s command:
   - walking (analysis.locomotion, 16 robots, random phases, 12 s of which the last 10 s count):
@@ -55,7 +55,7 @@ def meets_speed_and_coupling(result: obedience.Obedience) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--profile", default="cpu_fast")
+    parser.add_argument("--profile", default="cpu_oscillators")
     parser.add_argument("--eval_every", type=int, default=10, help="PPO iterations between evaluations")
     parser.add_argument("--max_minutes", type=float, default=30.0, help="training time before giving up")
     parser.add_argument("--num_threads", type=int, default=2)
