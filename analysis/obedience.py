@@ -208,7 +208,7 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
 
 def plot(results: list[Obedience]):
     """Top: share of robots walking the started gait; bottom: GRF impulse share in the stance half."""
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(COLUMN_WIDTH, 3.6), sharex=True, layout="constrained")
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(COLUMN_WIDTH, 3.9), sharex=True, layout="constrained")
     x = np.arange(len(results))
     width = 0.8 / len(STARTED_GAITS)
     for k, g in enumerate(STARTED_GAITS):
@@ -220,8 +220,8 @@ def plot(results: list[Obedience]):
             top.text(i, 102, "identical\nrobots", ha="center", va="bottom", fontsize=5)
     top.set_ylabel("walks the started\ngait at 10 s [%]")
     top.set_ylim(0, 118)
-    top.set_title(r"Oscillators started in a gait, $\sigma$ = 0, 1 m/s (contact-based gaits)")
-    top.legend(ncols=4, frameon=False, loc="upper left", fontsize=6)
+    top.set_title("Oscillators started in a gait\n" r"($\sigma$ = 0, 1 m/s; gaits from foot contacts)")
+    fig.legend(ncols=4, frameon=False, loc="outside lower center", handlelength=1.5, columnspacing=1.0)
     bottom.axhline(50, color="0.5", lw=0.6, ls="--")
     bottom.set_ylabel("GRF impulse in\nstance half [%]")
     bottom.set_ylim(0, 100)
