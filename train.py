@@ -153,7 +153,7 @@ def resolve(args: argparse.Namespace) -> Plan:
     """The configs of the run args ask for, every value checked; nothing is built or written (under torchrun
     the process joins its group here: a drawn seed is rank 0's)."""
     from gym_envs import env_cfg_class
-    from gym_envs.orc import parse_orc
+    from gym_envs.orc import parse_training_orc
     from learning import distributed, runs
     from learning.runner_config import (
         apply_split_overrides,
@@ -234,7 +234,7 @@ def resolve(args: argparse.Namespace) -> Plan:
     env_cfg.validate()
     train_cfg.validate(env_cfg.env.num_envs)
     if hasattr(env_cfg, "osc"):
-        parse_orc(env_cfg.osc.orc)
+        parse_training_orc(env_cfg.osc.orc)
     runs.check_folder_names(train_cfg.experiment_name, train_cfg.run_name)
     check_logger_ready(train_cfg)
     return Plan(task, env_cfg, train_cfg, log_root, ranks.rank, ranks.world_size, device, defaults, resume_from,

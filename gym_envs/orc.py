@@ -26,7 +26,15 @@ def parse_orc(text: str) -> ORC:
         raise ConfigError(
             f"malformed ORC string {text!r}; use three digits of 0/1 for Observations, Rewards, Coupling, e.g. 111"
         )
-    orc = ORC(*(c == "1" for c in text))
+    return ORC(*(c == "1" for c in text))
+
+
+def parse_training_orc(text: str) -> ORC:
+    """parse_orc for a configuration someone chose to train: 001 gets a warning that it equals 000.
+
+    Evaluations that switch coupling on for a C = 0 policy reach 001 deliberately and use parse_orc.
+    """
+    orc = parse_orc(text)
     if text == "001":
         warnings.warn(
             "ORC 001 equals 000: without phase observations or phase rewards the oscillators cannot "

@@ -10,7 +10,7 @@ from gym_envs import ConfigError, UnknownTaskError, env_cfg_class, make_env, osc
 from gym_envs.config import apply_overrides
 from gym_envs.legged_robot import sample_commands
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
-from gym_envs.orc import parse_orc
+from gym_envs.orc import parse_orc, parse_training_orc
 
 TWO_PI = 2 * math.pi
 
@@ -61,12 +61,14 @@ def test_malformed_orc_is_an_error(text):
         parse_orc(text)
 
 
-def test_orc_001_says_it_equals_000():
+def test_training_orc_001_says_it_equals_000_but_an_evaluation_that_couples_a_000_policy_is_quiet():
     with pytest.warns(UserWarning, match="001 equals 000"):
-        assert parse_orc("001") == (False, False, True)
+        assert parse_training_orc("001") == (False, False, True)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        parse_orc("111")
+        parse_training_orc("111")
+        assert parse_orc("001") == (False, False, True)
+        osc_env(2, orc="001")  # what analysis builds to run ORC-000 with sigma = 1
 
 
 def test_orc_r0_removes_phase_rewards_only():
