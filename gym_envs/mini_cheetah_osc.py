@@ -7,7 +7,6 @@ the phase rewards and the coupling; see gym_envs/orc.py.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -28,7 +27,7 @@ from gym_envs.legged_robot_config import (
     RewardsCfg,
 )
 from gym_envs.mini_cheetah import PROPRIOCEPTION, MiniCheetah, MiniCheetahCfg
-from gym_envs.orc import parse_orc
+from gym_envs.orc import ORC_FORMAT, is_orc_string, parse_orc
 
 OSCILLATOR_OBSERVATIONS = ("oscillator_obs", "oscillators_vel")
 PHASE_REWARDS = ("swing_grf", "stance_grf")
@@ -58,8 +57,7 @@ class OscillatorCfg:
 class MiniCheetahOscCfg(MiniCheetahCfg):
     RULES: ClassVar[dict] = {
         **MiniCheetahCfg.RULES,
-        "osc.orc": Check(lambda s: re.fullmatch("[01]{3}", s) is not None,
-                         "three digits of 0/1 for Observations, Rewards, Coupling, e.g. 111"),
+        "osc.orc": Check(is_orc_string, ORC_FORMAT),
         "osc.init": OneOf(oscillators.PHASE_INIT_MODES),
         "osc.process_noise_std": NON_NEGATIVE,
         "osc.omega_noise_std": NON_NEGATIVE,

@@ -20,12 +20,17 @@ class ORC(NamedTuple):
         return "".join("1" if on else "0" for on in self)
 
 
+ORC_FORMAT = "three digits of 0/1 for Observations, Rewards, Coupling, e.g. 111"
+
+
+def is_orc_string(text) -> bool:
+    return isinstance(text, str) and len(text) == 3 and not set(text) - {"0", "1"}
+
+
 def parse_orc(text: str) -> ORC:
     """'110' -> ORC(True, True, False). Anything but three 0/1 digits is an error."""
-    if not isinstance(text, str) or len(text) != 3 or set(text) - {"0", "1"}:
-        raise ConfigError(
-            f"malformed ORC string {text!r}; use three digits of 0/1 for Observations, Rewards, Coupling, e.g. 111"
-        )
+    if not is_orc_string(text):
+        raise ConfigError(f"malformed ORC string {text!r}; use {ORC_FORMAT}")
     return ORC(*(c == "1" for c in text))
 
 

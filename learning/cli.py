@@ -20,6 +20,7 @@ import sys
 from typing import Any, Callable
 
 from gym_envs.config import ConfigError, yaml_text
+from gym_envs.orc import ORC_FORMAT, is_orc_string
 
 EXIT_ERROR = 1
 EXIT_USAGE = 2
@@ -84,9 +85,8 @@ def number(low: float | None = None, low_open: bool = False) -> Callable[[str], 
 
 
 def orc(text: str) -> str:
-    if len(text) != 3 or set(text) - {"0", "1"}:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not an ORC string; use three digits of 0/1 for Observations, Rewards, Coupling, e.g. 111")
+    if not is_orc_string(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not an ORC string; use {ORC_FORMAT}")
     return text
 
 
