@@ -19,7 +19,7 @@ from dataclasses import dataclass
 # (docs/recipe-study.md), 350 iterations x 24576 steps in 442-492 s, 17.5k-19.5k. (The shipped
 # policies' manifest says 12.8k: those runs shared the machine with evaluations.)
 CPU_FAST_STEPS_PER_S = 18_500
-CPU_REFERENCE = "the idle 2-core development machine's cpu_fast rate, 18.5k env steps/s"
+CPU_REFERENCE = "the idle 2-core development machine's rate with the CPU recipes' 1024 robots x 24 steps, 18.5k env steps/s"
 CPU_PROFILE, GPU_PROFILE = "cpu_fast", "paper"
 # cpu_fast trains ORC-111 to pronk whatever its oscillators say (docs/recipe-study.md).
 CPU_PROFILE_OF_TASK = {"mini_cheetah_osc": "cpu_oscillators"}
