@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import ClassVar
 
 import torch
 from tensordict import TensorDict
 
+from gym_envs import mirror
 from gym_envs.config import ConfigError
 from gym_envs.legged_robot_config import CommandsCfg, LeggedRobotCfg, model_file
 from gym_envs.sim import SimBackend, SimState, make_backend
@@ -56,6 +58,17 @@ def sample_commands(c: CommandsCfg, n: int, generator: torch.Generator, device) 
 
 class LeggedRobot:
     cfg: LeggedRobotCfg
+    # How each observation term changes under the left-right mirror (a kind of gym_envs.mirror.term_map).
+    OBS_MIRROR: ClassVar[dict[str, str]] = {
+        "base_height": "even",
+        "base_lin_vel": "vector",
+        "base_ang_vel": "axial",
+        "projected_gravity": "vector",
+        "commands": "command",
+        "dof_pos_obs": "joints",
+        "dof_vel": "joints",
+        "dof_pos_target": "joints",
+    }
 
     def __init__(self, cfg: LeggedRobotCfg):
         cfg.validate()  # before anything is built
@@ -326,6 +339,31 @@ class LeggedRobot:
             width = getattr(self, f"_obs_{name}")().shape[1]
             scales[name] = self._term_vector(self._obs_scale, self.cfg.observations.scales, name, width, 1.0)
         return scales
+
+    def mirror_maps(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
+        """Left-right mirror maps, `(index, sign)` as in gym_envs.mirror, of the actions and of each
+        observation group ('actions', 'actor', 'critic'), from the model's geometry."""
+        joints = mirror.joint_map(self.sim.joint_anchors, self.sim.joint_axes, self.default_joint_pos.cpu().numpy())
+        legs = mirror.leg_map(self.sim.foot_positions)
+        maps = {"actions": joints}
+        self._check_mirror_symmetric("control.action_scale", self.action_scale, joints[0])
+        for group in ("actor", "critic"):
+            parts = []
+            for name, scale in self.observation_scales(group).items():
+                if name not in self.OBS_MIRROR:
+                    raise ConfigError(f"observation term {name!r} has no mirror rule; add it to "
+                                      f"{type(self).__name__}.OBS_MIRROR (kinds: gym_envs.mirror.term_map)")
+                parts.append(mirror.term_map(self.OBS_MIRROR[name], len(scale), joints, legs))
+                self._check_mirror_symmetric(f"observations.scales[{name!r}]", scale, parts[-1][0])
+            maps[group] = mirror.concatenate(parts)
+        return {key: (torch.as_tensor(index, device=self.device), torch.as_tensor(sign, dtype=torch.float32,
+                                                                                 device=self.device))
+                for key, (index, sign) in maps.items()}
+
+    @staticmethod
+    def _check_mirror_symmetric(what: str, values: torch.Tensor, index) -> None:
+        if not torch.equal(values[torch.as_tensor(index, device=values.device)], values):
+            raise ConfigError(f"{what} differs between left and right; mirror augmentation needs it symmetric")
 
     def _term_vector(self, cache: dict, table: dict, name: str, width: int, default: float) -> torch.Tensor:
         vec = cache.get(name)

@@ -150,6 +150,8 @@ def apply_orc(cfg: MiniCheetahOscCfg) -> MiniCheetahOscCfg:
 
 class MiniCheetahOsc(MiniCheetah):
     cfg: MiniCheetahOscCfg
+    # The oscillators are per leg and identical, so mirroring swaps them like the feet.
+    OBS_MIRROR: ClassVar[dict[str, str]] = {**MiniCheetah.OBS_MIRROR, "oscillator_obs": "legs", "oscillators_vel": "legs"}
 
     def __init__(self, cfg: MiniCheetahOscCfg):
         self.orc = parse_orc(cfg.osc.orc)

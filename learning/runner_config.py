@@ -24,6 +24,15 @@ TRAIN_PREFIX = "train."
 
 
 @dataclass
+class SymmetryCfg:
+    """rsl-rl's Symmetry extension with orcgym's left-right mirror (learning.symmetry); off unless a flag is set."""
+
+    use_data_augmentation: bool = False  # every mini-batch also trains on its mirror image
+    use_mirror_loss: bool = False  # penalise actions that differ from the mirrored actions of the mirrored state
+    mirror_loss_coeff: float = 0.0
+
+
+@dataclass
 class AlgorithmCfg:
     """PPO (rsl_rl.algorithms.PPO keyword arguments). Values of mini_cheetah_osc (facts §7.1, §10.11)."""
 
@@ -42,6 +51,7 @@ class AlgorithmCfg:
     schedule: str = "adaptive"  # 'adaptive' (KL-driven) or 'fixed'
     desired_kl: float = 0.01
     normalize_advantage_per_mini_batch: bool = False
+    symmetry_cfg: SymmetryCfg = field(default_factory=SymmetryCfg)
 
 
 @dataclass
@@ -123,6 +133,7 @@ class TrainCfg:
         "algorithm.optimizer": OneOf(("adam", "adamw", "sgd", "rmsprop")),  # rsl_rl.utils.resolve_optimizer
         "algorithm.schedule": OneOf(("adaptive", "fixed")),
         "algorithm.desired_kl": _POSITIVE,
+        "algorithm.symmetry_cfg.mirror_loss_coeff": Range(0.0),
         **_model_rules("actor"),
         **_model_rules("critic"),
     }
@@ -330,12 +341,18 @@ def to_rsl_rl_dict(cfg: TrainCfg) -> dict:
             block["distribution_cfg"] = resolve(block["distribution_cfg"])
         return block
 
+    algorithm = resolve(data["algorithm"])
+    symmetry = algorithm.pop("symmetry_cfg")
+    if symmetry["use_data_augmentation"] or symmetry["use_mirror_loss"]:
+        from learning.symmetry import mirror_augmentation
+
+        algorithm["symmetry_cfg"] = {**symmetry, "data_augmentation_func": mirror_augmentation}
     return {
         "num_steps_per_env": data["num_steps_per_env"],
         "save_interval": data["save_interval"],
         "check_for_nan": data["check_for_nan"],
         "obs_groups": {k: list(v) for k, v in data["obs_groups"].items()},
-        "algorithm": resolve(data["algorithm"]),
+        "algorithm": algorithm,
         "actor": resolve(data["actor"]),
         "critic": resolve(data["critic"]),
         "logger": logger_cfg(cfg),

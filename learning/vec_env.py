@@ -8,6 +8,8 @@ only moves tensors between the task's device and the learner's, and forwards
 
 from __future__ import annotations
 
+import functools
+
 import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
@@ -33,6 +35,11 @@ class TaskVecEnv(VecEnv):
     @episode_length_buf.setter
     def episode_length_buf(self, value: torch.Tensor) -> None:
         self.task.episode_length_buf = value.to(self.task.device)
+
+    @functools.cached_property
+    def mirror_maps(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
+        """The task's left-right mirror maps on the learner's device (learning.symmetry)."""
+        return {key: (index.to(self.device), sign.to(self.device)) for key, (index, sign) in self.task.mirror_maps().items()}
 
     def get_observations(self) -> TensorDict:
         return self.task.get_observations().to(self.device)

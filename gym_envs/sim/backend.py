@@ -12,6 +12,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 
@@ -53,6 +54,10 @@ class SimBackend(ABC):
     default_joint_pos: torch.Tensor  # (J,) from the model's 'home' keyframe
     joint_pos_limits: torch.Tensor  # (J, 2)
     torque_limits: torch.Tensor  # (J,)
+    # Geometry at the home keyframe in the base frame (numpy), for the left-right mirror maps:
+    joint_anchors: np.ndarray  # (J, 3) [m]
+    joint_axes: np.ndarray  # (J, 3) unit vectors
+    foot_positions: np.ndarray  # (L, 3) [m]
 
     @property
     def num_joints(self) -> int:

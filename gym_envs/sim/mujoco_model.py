@@ -73,6 +73,9 @@ class MujocoModelBackend(SimBackend):
 
         self.foot_names = tuple(foot_sensors)
         self._foot_rows = force_sensor_rows(m, foot_sensors)
+        self.joint_anchors, self.joint_axes, self.foot_positions = home_geometry(
+            m, self._home_key, self._base_body, joints, foot_sensors
+        )
         self._termination_rows = force_sensor_rows(m, termination_sensors)
         self._ground_geom = named_id(m, mujoco.mjtObj.mjOBJ_GEOM, ground_geom, "geom")
         return m
@@ -87,6 +90,29 @@ def named_id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str, label: str) 
     if idx < 0:
         raise SimSetupError(f"the model has no {label} named {name!r}")
     return idx
+
+
+def home_geometry(model: mujoco.MjModel, key: int, base_body: int, joints: list[int], foot_sensors: tuple[str, ...]):
+    """Joint anchors and axes and foot positions, (J, 3), (J, 3) and (L, 3), in the base frame at a keyframe."""
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, key)
+    mujoco.mj_forward(model, data)
+    origin, rotation = data.xpos[base_body], data.xmat[base_body].reshape(3, 3)
+    positions = {
+        mujoco.mjtObj.mjOBJ_GEOM: data.geom_xpos,
+        mujoco.mjtObj.mjOBJ_SITE: data.site_xpos,
+        mujoco.mjtObj.mjOBJ_BODY: data.xpos,
+    }
+    feet = []
+    for name in foot_sensors:
+        sid = named_id(model, mujoco.mjtObj.mjOBJ_SENSOR, name, "sensor")
+        kind = mujoco.mjtObj(model.sensor_objtype[sid])
+        if kind not in positions:
+            raise SimSetupError(f"sensor {name!r} is attached to a {kind.name}; a foot sensor needs a geom, site or body")
+        feet.append(positions[kind][model.sensor_objid[sid]])
+    anchors = (data.xanchor[joints] - origin) @ rotation
+    axes = data.xaxis[joints] @ rotation
+    return anchors, axes, (np.array(feet) - origin) @ rotation
 
 
 def force_sensor_rows(model: mujoco.MjModel, names: tuple[str, ...]) -> np.ndarray:
