@@ -326,7 +326,8 @@ def _main(args: argparse.Namespace) -> int:
             print(setup.defaults.describe(env_cfg.sim.backend))
             print(expected_duration(env_cfg.env.device.split(":")[0], env_cfg.sim.backend, env_cfg.env.num_envs,
                                     train_cfg.num_steps_per_env,
-                                    train_cfg.max_iterations - runner.current_learning_iteration, setup.world))
+                                    train_cfg.max_iterations - runner.current_learning_iteration, setup.world,
+                                    mirrored=train_cfg.algorithm.symmetry_cfg.use_data_augmentation))
             print(f"task {setup.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
             print(f"run folder {run_dir}{resuming}", flush=True)
 

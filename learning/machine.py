@@ -14,12 +14,12 @@ import datetime
 import importlib.util
 from dataclasses import dataclass
 
-# Env steps per second of cpu_fast-sized training (1024 robots x 24 steps, [128, 128, 64]), learning and
-# checkpoints included, on the idle 2-core development machine: the recipe study's runs E4-E6
-# (docs/recipe-study.md), 350 iterations x 24576 steps in 442-492 s, 17.5k-19.5k. (The shipped
-# policies' manifest says 12.8k: those runs shared the machine with evaluations.)
-CPU_FAST_STEPS_PER_S = 18_500
-CPU_REFERENCE = "the idle 2-core development machine's rate with the CPU recipes' 1024 robots x 24 steps, 18.5k env steps/s"
+# Env steps per second of the CPU recipes' training (1024 robots x 24 steps, [128, 128, 64]), learning and
+# checkpoints included, on the idle 2-core development machine (docs/recipe-study.md): 20.9k-23.4k in the
+# runs E9 and E12 (350-1000 iterations); with mirror augmentation, whose update is twice as large, 14.0k-14.6k
+# (E14 seeds 0 and 1, 1000 and 600 iterations).
+CPU_STEPS_PER_S = 22_000
+CPU_MIRRORED_STEPS_PER_S = 14_500
 CPU_PROFILE, GPU_PROFILE = "cpu_fast", "paper"
 # cpu_fast trains ORC-111 to pronk whatever its oscillators say (docs/recipe-study.md).
 CPU_PROFILE_OF_TASK = {"mini_cheetah_osc": "cpu_oscillators"}
@@ -77,17 +77,21 @@ def choose_defaults(device: str | None, profile: str | None, sim: str | None, *,
 
 
 def expected_duration(device: str, sim: str, num_envs: int, steps_per_env: int, iterations: int,
-                      world_size: int = 1) -> str:
+                      world_size: int = 1, mirrored: bool = False) -> str:
     """One line: the expected wall time of `iterations` PPO iterations, and what the estimate rests on.
 
     `world_size` processes (torchrun) each step `num_envs` robots; on the CPU they share the cores the rate was
-    measured on, so the estimate counts the env steps of all of them.
+    measured on, so the estimate counts the env steps of all of them. `mirrored`: mirror augmentation doubles
+    the update.
     """
     per_iteration = num_envs * steps_per_env * world_size
     if device == "cpu" and sim == "mujoco":
-        seconds = iterations * per_iteration / CPU_FAST_STEPS_PER_S
+        rate = CPU_MIRRORED_STEPS_PER_S if mirrored else CPU_STEPS_PER_S
+        seconds = iterations * per_iteration / rate
+        reference = (f"the idle 2-core development machine's rate with the CPU recipes' 1024 robots x 24 steps"
+                     f"{' and mirror augmentation' if mirrored else ''}, {rate / 1000:g}k env steps/s")
         return (f"expected duration: about {_human(seconds)} for {iterations} iterations x {per_iteration:,} "
-                f"env steps, at {CPU_REFERENCE} (more cores are faster); the progress lines give this machine's ETA")
+                f"env steps, at {reference} (more cores are faster); the progress lines give this machine's ETA")
     return (f"expected duration: no measured rate for {device} with {sim} physics ({iterations} iterations x "
             f"{per_iteration:,} env steps); the progress lines give the ETA from the first iteration")
 

@@ -8,7 +8,7 @@ import re
 import pytest
 
 import train
-from learning.machine import CPU_FAST_STEPS_PER_S, choose_defaults, expected_duration
+from learning.machine import CPU_MIRRORED_STEPS_PER_S, CPU_STEPS_PER_S, choose_defaults, expected_duration
 from learning.runner_config import PROFILES
 
 
@@ -58,8 +58,12 @@ def test_expected_duration_rests_on_the_measured_cpu_rate():
     iterations, envs, steps = int(fast["train.max_iterations"]), int(fast["env.num_envs"]), int(
         fast["train.num_steps_per_env"])
     line = expected_duration("cpu", "mujoco", envs, steps, iterations)
-    minutes = iterations * envs * steps / CPU_FAST_STEPS_PER_S / 60
-    assert 5 < minutes < 20 and f"about {round(minutes)} min" in line and "18.5k env steps/s" in line
+    minutes = iterations * envs * steps / CPU_STEPS_PER_S / 60
+    assert 3 < minutes < 20 and f"about {round(minutes)} min" in line and "22k env steps/s" in line
+    # The mirrored update of cpu_oscillators costs more per env step.
+    mirrored = expected_duration("cpu", "mujoco", envs, steps, iterations, mirrored=True)
+    assert f"about {round(iterations * envs * steps / CPU_MIRRORED_STEPS_PER_S / 60)} min" in mirrored
+    assert "and mirror augmentation" in mirrored and CPU_MIRRORED_STEPS_PER_S < CPU_STEPS_PER_S
     assert re.search(r"about [3-9]\.\d h", expected_duration("cpu", "mujoco", 4096, 32, 2000))  # the paper on a CPU
     assert "no measured rate for cuda" in expected_duration("cuda", "warp", 4096, 32, 2000)
     # Two torchrun processes on the CPU share its cores: twice the env steps, twice the time.
