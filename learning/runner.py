@@ -121,8 +121,7 @@ class TaskRunner(OnPolicyRunner):
 
     def __init__(self, env: TaskVecEnv, train_cfg: TrainCfg, log_dir: str | None = None, device: str = "cpu"):
         self.train_cfg = train_cfg
-        symmetry = train_cfg.algorithm.symmetry_cfg
-        if symmetry.use_data_augmentation or symmetry.use_mirror_loss:
+        if train_cfg.algorithm.symmetry_cfg.enabled:
             env.mirror_maps  # noqa: B018  (builds the maps now: an asymmetric model fails before any file is written)
         with quiet():
             super().__init__(env, to_rsl_rl_dict(train_cfg), log_dir=log_dir, device=device)

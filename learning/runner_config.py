@@ -31,6 +31,10 @@ class SymmetryCfg:
     use_mirror_loss: bool = False  # penalise actions that differ from the mirrored actions of the mirrored state
     mirror_loss_coeff: float = 0.0
 
+    @property
+    def enabled(self) -> bool:
+        return self.use_data_augmentation or self.use_mirror_loss
+
 
 @dataclass
 class AlgorithmCfg:
@@ -345,7 +349,7 @@ def to_rsl_rl_dict(cfg: TrainCfg) -> dict:
 
     algorithm = resolve(data["algorithm"])
     symmetry = algorithm.pop("symmetry_cfg")
-    if symmetry["use_data_augmentation"] or symmetry["use_mirror_loss"]:
+    if cfg.algorithm.symmetry_cfg.enabled:
         from learning.symmetry import mirror_augmentation
 
         algorithm["symmetry_cfg"] = {**symmetry, "data_augmentation_func": mirror_augmentation}
