@@ -40,6 +40,7 @@ ENV_YAML, TRAIN_YAML = "env.yaml", "train.yaml"
 EXPORT_DIR = "exported"
 
 _CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
+_GIT_SECTION_RE = re.compile(r"--- git (\w+) ---\n(.*?)(?=\n--- git |\Z)", re.S)
 _TIMESTAMP_FORMAT = "%Y-%m-%d_%H-%M-%S"
 _TIMESTAMP_LEN = len("2000-01-01_00-00-00")
 
@@ -363,6 +364,18 @@ def export_dir(run_dir: str, log_root: str) -> str:
     if is_shipped(run_dir):
         return os.path.join(log_root, "shipped", os.path.basename(run_dir), EXPORT_DIR)
     return os.path.join(run_dir, EXPORT_DIR)
+
+
+def trained_commit(run_dir: str) -> str | None:
+    """The short commit a run was trained at, from the code state rsl-rl's logger stores in <run>/git/;
+    '+diff' marks a run trained with uncommitted changes. None when the run has no such record."""
+    for path in sorted(glob.glob(os.path.join(run_dir, "git", "*.diff"))):
+        with open(path) as f:
+            sections = dict(_GIT_SECTION_RE.findall(f.read()))
+        commit = sections.get("commit", "").strip()
+        if commit:
+            return commit[:7] + ("+diff" if sections.get("diff", "").strip() else "")
+    return None
 
 
 def run_task(run_dir: str) -> str | None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import subprocess
 
 import pytest
 import torch
@@ -255,6 +256,26 @@ def test_train_counts_completed_iterations_and_resumes_from_them(tmp_path):
     assert resumed.current_learning_iteration == 3
     for a, b in zip(resumed.alg.actor.state_dict().values(), runner.alg.actor.state_dict().values()):
         assert torch.equal(a, b)
+
+
+def test_a_run_records_the_commit_it_was_trained_at(tmp_path):
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=runs.REPO_ROOT, capture_output=True,
+                          text=True).stdout.strip()
+    if not head:
+        pytest.skip("not a git checkout")
+    runner = small_runner(small_env(8), log_dir=str(tmp_path), save_interval=1)
+    assert runner.train(1)
+    assert runs.trained_commit(str(tmp_path))[:7] == head[:7]
+    assert runs.trained_commit(str(tmp_path / "nowhere")) is None
+
+
+def test_trained_commit_marks_uncommitted_changes(tmp_path):
+    (tmp_path / "git").mkdir()
+    record = "--- git commit ---\n{}\n\n\n--- git status ---\nOn branch main\n\n\n--- git diff ---\n{}"
+    (tmp_path / "git" / "repo.diff").write_text(record.format("924bf99c4fb920f3e6feb812f73b6e17a0c457fd", ""))
+    assert runs.trained_commit(str(tmp_path)) == "924bf99"
+    (tmp_path / "git" / "repo.diff").write_text(record.format("924bf99c4fb9", "+++ b/train.py\n+x = 1\n"))
+    assert runs.trained_commit(str(tmp_path)) == "924bf99+diff"
 
 
 def test_load_policy_gives_the_runners_deterministic_actor(tmp_path):

@@ -64,8 +64,7 @@ def measure(policy_dir: str, num_threads: int) -> dict:
 
 
 def ship(args) -> list[dict]:
-    commit = args.commit or subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                                           text=True).stdout.strip()
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     rows = []
     for orc in PAPER_CONFIGURATIONS:
         folder = os.path.join(args.runs, f"ORC_{orc}")
@@ -87,7 +86,8 @@ def ship(args) -> list[dict]:
         with open(os.path.join(run_dir, "sweep_status.yaml")) as f:
             status = yaml.safe_load(f)
         rows.append({
-            "orc": orc, "command_mps": 1.0, "commit": commit, "seed": loaded.train_cfg.seed, "iterations": iteration,
+            "orc": orc, "command_mps": 1.0, "commit": args.commit or runs.trained_commit(run_dir) or head,
+            "seed": loaded.train_cfg.seed, "iterations": iteration,
             "wall_time_s": status.get("wall_time_s", ""), "machine": args.machine, "profile": loaded.train_cfg.profile,
             **measure(target, args.num_threads),
         })
@@ -109,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=runs.POLICY_ROOT)
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--machine", help="what trained the runs, for the manifest (needed with --runs)")
-    parser.add_argument("--commit", default=None, help="the commit that trained the runs (default: HEAD)")
+    parser.add_argument("--commit", default=None, help="the commit that trained the runs (default: the one each run "
+                        "recorded in its git/ folder, else HEAD)")
     parser.add_argument("--num_threads", type=int, default=2)
     args = parser.parse_args(argv)
     if bool(args.runs) == args.remeasure:
