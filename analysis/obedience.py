@@ -12,8 +12,8 @@ phases". Made measurable here, per policy:
      the gait mix every second, the share in a regular gait at 10 s, and per robot the time
      from which it stays in one regular gait to the end (median over robots).
 Policies without phase observations cannot see their oscillators: under the deterministic
-evaluation all their robots move identically, which is reported as such ("identical robots")
-rather than as a distribution.
+evaluation their robots are one sample repeated (analysis.rollout), which is reported as such
+("identical robots") rather than as a distribution.
 
 Usage: python -m analysis.obedience [--runs DIR] --out DIR [--quick]
 """
@@ -54,7 +54,7 @@ class StartedGait:
     velocity: float  # mean forward velocity over the last VELOCITY_WINDOW_S [m/s]
     stance_share: float  # GRF impulse in the own stance half, mean over feet and robots
     falls: int
-    identical: bool  # every robot did exactly the same (a policy blind to its phases)
+    identical: bool  # the robots are one sample repeated (Rollout.robots_alike: a policy blind to its phases)
 
 
 @dataclass

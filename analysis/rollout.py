@@ -17,6 +17,15 @@ evaluation scripts actually ran with 0.25 because their switch-off wrote to a mi
 Recording: sample k of a recorded signal is the state right after control step `record_from + k + 1`
 (logged once per control step, 100 Hz). `terminated[n, k]` is True if robot n ended an episode on
 that step; the recorded state is then the state after its reset.
+
+One sample repeated: when the policy cannot tell the robots apart (no phase observations, the task's
+`robots_indistinguishable`) and robots get the same policy, command and push, they are the same
+sample by construction. Their records would still part in floating point (a batch's rows round
+differently in the last bit depending on whether a vector or a scalar loop handled them, and contact
+dynamics grow that), so how many robots looked "alike", or which gait each showed, would depend on the
+processor and the batch size. The rollout therefore records such a group as its first robot's
+trajectory, repeated (`Rollout.sample`); the oscillator phases, which depend on each robot's own
+initial draw, stay per robot.
 """
 
 from __future__ import annotations
@@ -215,11 +224,12 @@ class Signal:
     shape: tuple[int, ...]
     dtype: Any = np.float32
     doc: str = ""
+    per_robot_draw: bool = False  # depends on the robot's own random draw, not only on the policy's inputs
 
 
 SIGNALS: dict[str, Signal] = {
     "grf": Signal(lambda e: e.grf, (4,), doc="normalised GRF per foot, last substep (RF, LF, RH, LH)"),
-    "phase": Signal(lambda e: e.phase, (4,), doc="oscillator phases [rad] in [0, 2pi)"),
+    "phase": Signal(lambda e: e.phase, (4,), doc="oscillator phases [rad] in [0, 2pi)", per_robot_draw=True),
     "base_lin_vel": Signal(lambda e: e.base_lin_vel, (3,), doc="trunk linear velocity, body frame [m/s]"),
     "base_ang_vel": Signal(lambda e: e.base_ang_vel, (3,), doc="trunk angular velocity, body frame [rad/s]"),
     "base_height": Signal(lambda e: e.state.base_pos[:, 2], (), doc="trunk height, world z [m]"),
@@ -240,6 +250,12 @@ class Rollout:
     num_steps: int
     record_from: int = 0
     info: dict = field(default_factory=dict)
+    # sample[n] == sample[m]: robots n and m are one sample repeated (see the module doc); None: all distinct
+    sample: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.sample is None:
+            self.sample = np.arange(self.num_envs)
 
     @property
     def num_envs(self) -> int:
@@ -255,11 +271,10 @@ class Rollout:
         """(N,) robots that terminated at least once in the recorded window."""
         return self.data["terminated"].any(axis=1)
 
-    def robots_alike(self, signal: str = "grf") -> bool:
-        """Every robot recorded the same signal: a policy that does not observe its oscillator phases
-        moves all robots alike under the deterministic evaluation, so they are one sample, repeated."""
-        x = self.data[signal]
-        return bool(len(x) > 1 and np.ptp(x, axis=0).max() < 1e-6)
+    def robots_alike(self) -> bool:
+        """The robots are one sample repeated: decided from what the policy observes and the inputs each
+        robot got, not from the records (module doc)."""
+        return bool(self.num_envs > 1 and np.all(self.sample == self.sample[0]))
 
     def rows(self, index) -> Rollout:
         """The same rollout restricted to some robots."""
@@ -268,6 +283,7 @@ class Rollout:
             data={k: v[index] for k, v in self.data.items()},
             initial_phase=self.initial_phase[index],
             info=dict(self.info),
+            sample=self.sample[index],
         )
 
 
@@ -318,7 +334,25 @@ def rollout(
     finally:
         torch.set_num_threads(torch_threads)
         bar.close()
-    return Rollout(buffers, initial_phase, env.dt, num_steps, record_from)
+    sample = _samples(env, policy, command, push_step, push_delta)
+    for name, buf in buffers.items():
+        if not SIGNALS[name].per_robot_draw:
+            buf[:] = buf[sample]
+    return Rollout(buffers, initial_phase, env.dt, num_steps, record_from, sample=sample)
+
+
+def _samples(env, policy, command: torch.Tensor, push_step, push_delta) -> np.ndarray:
+    """Per robot, the first robot it is one sample with: the same policy, command and push, and a policy
+    that cannot tell robots apart (the module doc); otherwise itself."""
+    n = env.num_envs
+    if not env.robots_indistinguishable():
+        return np.arange(n)
+    counts = np.diff(policy.offsets) if isinstance(policy, StackedPolicy) else [n]
+    inputs = [np.repeat(np.arange(len(counts)), counts)[:, None], command.cpu().numpy()]
+    if push_step is not None:
+        inputs += [np.asarray(push_step, float)[:, None], np.asarray(push_delta, float)]
+    _, first, group = np.unique(np.concatenate(inputs, axis=1), axis=0, return_index=True, return_inverse=True)
+    return first[group.reshape(-1)]
 
 
 def _loop(env, policy, obs, num_steps, command, command_step, pushes, buffers, record_from, bar) -> None:

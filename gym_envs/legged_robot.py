@@ -69,6 +69,8 @@ class LeggedRobot:
         "dof_vel": "joints",
         "dof_pos_target": "joints",
     }
+    # Actor terms whose values are drawn per robot even when the robots start alike (a task's own state).
+    PER_ROBOT_DRAWN_TERMS: ClassVar[frozenset[str]] = frozenset()
 
     def __init__(self, cfg: LeggedRobotCfg):
         cfg.validate()  # before anything is built
@@ -91,6 +93,27 @@ class LeggedRobot:
         self._init_observation_terms()
         self._init_domain_randomisation()
         self.reset()
+
+    def robots_indistinguishable(self) -> bool:
+        """Whether the policy cannot tell this env's robots apart: they start alike (the default reset, no
+        randomisation, no random pushes, no per-robot command draws) and the actor sees no noise and no
+        per-robot draw. Given the same command and pushes, a deterministic policy then moves every robot
+        alike, so the robots are one sample repeated; in floating point their records still part, because
+        a batch's rows can round differently in the last bit (vector and scalar loops) and contact dynamics
+        amplify that."""
+        cfg = self.cfg
+        dr, cmd, obs = cfg.domain_rand, cfg.commands, cfg.observations
+        starts_alike = cfg.init_state.mode == "default" and not (
+            dr.randomize_friction or dr.randomize_base_mass or dr.randomize_base_com or cfg.push.enabled
+        )
+        commands_alike = (
+            len(set(cmd.lin_vel_x_choices)) <= 1 and cmd.lin_vel_x_noise == 0.0
+            and all(low == high for low, high in (cmd.lin_vel_x, cmd.lin_vel_y, cmd.yaw_rate))
+            and cmd.zero_lateral_and_yaw_prob == cmd.zero_planar_prob == cmd.zero_all_prob == 0.0
+        )
+        actor_noise = obs.noise_scale > 0 and any(name in obs.noise for name in obs.actor)
+        draws_seen = any(name in self.PER_ROBOT_DRAWN_TERMS for name in obs.actor)
+        return starts_alike and commands_alike and not actor_noise and not draws_seen
 
     # --- set-up ---------------------------------------------------------------------------------
 

@@ -152,6 +152,7 @@ class MiniCheetahOsc(MiniCheetah):
     cfg: MiniCheetahOscCfg
     # The oscillators are per leg and identical, so mirroring swaps them like the feet.
     OBS_MIRROR: ClassVar[dict[str, str]] = {**MiniCheetah.OBS_MIRROR, "oscillator_obs": "legs", "oscillators_vel": "legs"}
+    PER_ROBOT_DRAWN_TERMS: ClassVar[frozenset[str]] = frozenset(OSCILLATOR_OBSERVATIONS)  # the initial phases
 
     def __init__(self, cfg: MiniCheetahOscCfg):
         self.orc = parse_orc(cfg.osc.orc)

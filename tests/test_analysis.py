@@ -280,3 +280,27 @@ def test_locomotion_check_of_a_standing_policy():
     assert check.falls == 0 and abs(check.mean_velocity) < 0.1
     assert check.tracking_error == pytest.approx(1.0, abs=0.1)  # it stands while asked to walk at 1 m/s
     assert check.gaits == {"transition": 1.0} and check.regular_share == 0.0  # no footfalls, no gait
+
+
+def test_one_sample_is_decided_from_the_policys_inputs():
+    blind, seeing = _tiny_run("011"), _tiny_run("111")
+    assert make_env("mini_cheetah_osc", eval_env_cfg(blind.env_cfg, EvalSettings(), 2)).robots_indistinguishable()
+    assert not make_env("mini_cheetah_osc", eval_env_cfg(seeing.env_cfg, EvalSettings(), 2)).robots_indistinguishable()
+    noisy = eval_env_cfg(blind.env_cfg, EvalSettings(observation_noise=True), 2)
+    assert not make_env("mini_cheetah_osc", noisy).robots_indistinguishable()
+    assert not make_env("mini_cheetah_osc", blind.env_cfg).robots_indistinguishable()  # training: randomised
+
+    # Two phase-blind policies in one batch, some robots pushed: robots are one sample with those that
+    # share their policy, command and push; the oscillator phases stay each robot's own.
+    other = _tiny_run("011", 1)
+    push_step = np.array([-1, -1, 5, 5, -1, -1, -1])
+    push_delta = np.array([[0.0, 0.0]] * 2 + [[1.0, 0.0], [-1.0, 0.0]] + [[0.0, 0.0]] * 3)
+    out = run_jobs([Job(blind, 4, push_step[:4], push_delta[:4]), Job(other, 3, push_step[4:], push_delta[4:])], 20,
+                   record=("grf", "phase", "base_lin_vel", "terminated"), num_threads=1, progress=False)
+    assert out[0].sample.tolist() == [0, 0, 2, 3] and out[1].sample.tolist() == [4, 4, 4]
+    assert not out[0].robots_alike() and out[0].rows([0, 1]).robots_alike() and out[1].robots_alike()
+    assert np.array_equal(out[1].data["base_lin_vel"][1], out[1].data["base_lin_vel"][0])
+    assert not np.array_equal(out[0].data["base_lin_vel"][2], out[0].data["base_lin_vel"][3])
+    assert not np.array_equal(out[1].data["phase"][1], out[1].data["phase"][0])
+    seen = run_jobs([Job(seeing, 3)], 5, record=("grf", "terminated"), num_threads=1, progress=False)[0]
+    assert seen.sample.tolist() == [0, 1, 2] and not seen.robots_alike()

@@ -44,9 +44,12 @@ def test_a_pronker_obeys_only_pronk():
         assert res.stance_share == pytest.approx(0.5, abs=0.02)  # half its load lands in swing
 
 
-def test_identical_robots_are_detected():
+def test_robots_alike_is_decided_by_their_samples_not_their_records():
     r = synthetic_rollout(IDEAL_GAITS["trot"])
-    r.data["grf"][:] = r.data["grf"][:1]
+    assert not obedience.started_gait_result(r, "trot").identical
+    r.data["grf"][:] = r.data["grf"][:1]  # equal records alone do not make one sample
+    assert not obedience.started_gait_result(r, "trot").identical
+    r.sample = np.zeros(r.num_envs, dtype=int)
     assert obedience.started_gait_result(r, "trot").identical
 
 
@@ -61,12 +64,21 @@ def test_settle_times():
     assert obedience.settle_times(times, labels).tolist() == [1.0, 3.0, np.inf, 3.0]
 
 
-def test_shipped_policies_tiny_rollout():
+@pytest.fixture(scope="module")
+def shipped_3_and_16():
+    """Obedience of a phase-blind and a phase-observing shipped policy, with 3 and with 16 robots each.
+
+    3 robots is the size at which rows of a batch are partly handled by vector and partly by scalar
+    loops, whose last-bit differences contact dynamics grow (issue 21, measured on AMD EPYC)."""
     runs = [load_policy_run(f"{SHIPPED_POLICIES}/ORC_{orc}") for orc in ("110", "000")]
-    results = obedience.measure(runs, robots=3, duration_s=10.0, settle_robots=3, settle_duration_s=5.0,
-                                progress=False, num_threads=1)
-    by_orc = {r.orc: r for r in results}
-    for r in results:
+    return {robots: {r.orc: r for r in obedience.measure(runs, robots=robots, duration_s=10.0, settle_robots=robots,
+                                                          settle_duration_s=5.0, progress=False, num_threads=1)}
+            for robots in (3, 16)}
+
+
+def test_shipped_policies_tiny_rollout(shipped_3_and_16):
+    by_orc = shipped_3_and_16[3]
+    for r in by_orc.values():
         assert set(r.started) == set(obedience.STARTED_GAITS)
         for s in r.started.values():
             assert s.robots == 3
@@ -75,6 +87,23 @@ def test_shipped_policies_tiny_rollout():
             assert s.phase_agreement == pytest.approx(s.obeyed)
             assert 0.0 <= s.stance_share <= 1.0
         assert r.settling.times[-1] == 5.0 and len(r.settling.mix) == 5
-    # ORC-000 observes no phases: under deterministic evaluation its robots all move alike.
-    assert all(s.identical for s in by_orc["000"].started.values())
-    assert not any(s.identical for s in by_orc["110"].started.values())
+    # ORC-000 observes no phases: under deterministic evaluation its robots are one sample repeated.
+    assert all(s.identical for s in by_orc["000"].started.values()) and by_orc["000"].settling.identical
+    assert not any(s.identical for s in by_orc["110"].started.values()) and not by_orc["110"].settling.identical
+
+
+def test_what_obedience_reports_does_not_depend_on_the_batch_size(shipped_3_and_16):
+    small, large = shipped_3_and_16[3], shipped_3_and_16[16]
+    blind_small, blind_large = small["000"], large["000"]
+    for g in obedience.STARTED_GAITS:
+        a, b = blind_small.started[g], blind_large.started[g]
+        assert (a.identical, a.obeyed, a.contact_mix, a.falls > 0) == (b.identical, b.obeyed, b.contact_mix, b.falls > 0)
+        assert a.obeyed in (0.0, 1.0)  # one sample: all robots or none
+    assert blind_small.settling.mix == blind_large.settling.mix
+    assert blind_small.settling.identical and blind_large.settling.identical
+    # ORC-110 sees its phases, so its robots are a sample of the started phases; it obeys every gait at
+    # either size (100 % of 64 robots per gait in the shipped manifest), so the labels agree too.
+    for g in obedience.STARTED_GAITS:
+        a, b = small["110"].started[g], large["110"].started[g]
+        assert not a.identical and not b.identical
+        assert a.obeyed == b.obeyed == 1.0

@@ -75,6 +75,8 @@ def test_added_mass_is_physical(make_sim):
 
 
 def test_same_inputs_same_outputs_at_any_thread_count(make_sim):
+    # Bitwise, and on any processor: the batch is the same size, and each world is stepped by the same
+    # code whichever thread takes it. Different batch sizes are never compared bitwise (issue 21).
     runs = []
     for threads in (1, 2):
         sim = make_sim(num_envs=6, num_threads=threads)
