@@ -79,6 +79,10 @@ class RewardsCfg:
     weights: dict[str, float] = field(default_factory=dict)
     termination_penalty: float = 0.0  # subtracted on a terminated step, not scaled by dt
     tracking_sigma: float = 0.25
+    # Yaw-rate tracking: 'sqexp' of the error relative to the command, like the linear term (the paper's
+    # squared exponential, with a gradient across the whole +-3 rad/s range); 'released_quartic' is the
+    # released code's exp(-4 ((c - w) / 5)^4), nearly flat within 1 rad/s (docs/design.md).
+    yaw_tracking: str = "sqexp"
     base_height_target: float = 0.33
 
 
@@ -160,6 +164,7 @@ class LeggedRobotCfg:
         "rewards.tracking_sigma": POSITIVE,
         "rewards.base_height_target": POSITIVE,
         "init_state.mode": OneOf(("range", "default")),
+        "rewards.yaw_tracking": OneOf(("sqexp", "released_quartic")),
         "init_state.base_height": POSITIVE,
         "init_state.lin_vel_x": Ordered(),
         "init_state.lin_vel_y": Ordered(),

@@ -69,9 +69,10 @@ class MiniCheetah(LeggedRobot):
         return torch.exp(-torch.sum(error**2, dim=1) / self.cfg.rewards.tracking_sigma)
 
     def _reward_tracking_ang_vel(self):
-        # The released code squares the error twice: exp(-4 (e/5)^4), flat for small errors. Kept.
-        error = (self.commands[:, 2] - self.base_ang_vel[:, 2]) / 5.0
-        return self._sqexp(error**2)
+        error = self.commands[:, 2] - self.base_ang_vel[:, 2]
+        if self.cfg.rewards.yaw_tracking == "released_quartic":
+            return self._sqexp((error / 5.0) ** 2)  # squared twice: 0.994 of the reward at a 1 rad/s error
+        return self._sqexp(error / (1.0 + self.commands[:, 2].abs()))
 
     def _reward_orientation(self):
         return torch.sum(self._sqexp(self.projected_gravity[:, :2]), dim=1)

@@ -47,7 +47,8 @@ class OscillatorCfg:
     # How those episodes start their oscillators ('any_gait': one of the four ideal gaits, so the rarely
     # held ones, pace above all, get a fair share of the uncoupled data); coupled episodes use `init`.
     uncoupled_init: str = "random"
-    stand_threshold: float = 0.5  # |v_x| below this uses the standing parameters
+    stand_threshold: float = 0.5  # a standing speed (standing_rule) below this uses the standing parameters
+    standing_rule: str = "lin_vel_x"  # one of gym_envs.oscillators.STANDING_RULES
     # Quirk switches of the released code, off by default:
     hold_grf: bool = False  # integrate all substeps with the previous control step's last force
     grf_normaliser_mass: float = 0.0  # [kg]; 0 uses the model's mass (8.952), the release used 8.292
@@ -66,6 +67,7 @@ class MiniCheetahOscCfg(MiniCheetahCfg):
         "osc.coupling_off_prob": SHARE,
         "osc.uncoupled_init": OneOf(oscillators.PHASE_INIT_MODES),
         "osc.stand_threshold": NON_NEGATIVE,
+        "osc.standing_rule": OneOf(oscillators.STANDING_RULES),
         "osc.grf_normaliser_mass": NON_NEGATIVE,
     }
     env: EnvCfg = field(default_factory=lambda: EnvCfg(episode_length_s=4.0))
@@ -185,6 +187,7 @@ class MiniCheetahOsc(MiniCheetah):
             coupling_noise_std=osc.coupling_noise_std,
             generator=self.generator,
             coupling_enabled=self.orc.coupling,
+            stand_speed=oscillators.standing_speed(self.commands, osc.standing_rule),
         )
         if osc.coupling_off_prob > 0.0:
             self.coupling = self.coupling * self.coupling_on
@@ -217,7 +220,7 @@ class MiniCheetahOsc(MiniCheetah):
         super()._log_episodes(env_ids)
         # Which relative phases the moving robots' oscillators hold right now: if coupling pulls every
         # robot into one pattern, the policy never sees (and never learns to follow) the others.
-        moving = self.commands[:, 0].abs() >= self.cfg.osc.stand_threshold
+        moving = oscillators.standing_speed(self.commands, self.cfg.osc.standing_rule) >= self.cfg.osc.stand_threshold
         if moving.any():
             labels, _ = oscillators.classify_rpd(oscillators.relative_phases(self.phase[moving]))
             shares = torch.bincount(labels, minlength=len(oscillators.GAIT_NAMES) + 1).float() / len(labels)

@@ -40,6 +40,20 @@ GAIT_NAMES = tuple(IDEAL_RPD)
 PHASE_INIT_MODES = ("random", *GAIT_NAMES, "any_gait", "standing")
 # Farther than this (wrapped Euclidean distance in RPD space) from every ideal gait is a transition.
 TRANSITION_DISTANCE = 2.0
+# What selects the standing schedule: |v_x| alone (paper, released code), or every command component
+# ('command'), so that turning on the spot and side steps run the moving schedule instead of sigma = 4
+# holding every phase at mid-stance.
+STANDING_RULES = ("lin_vel_x", "command")
+
+
+def standing_speed(command: torch.Tensor, rule: str = "lin_vel_x") -> torch.Tensor:
+    """(N,) the speed that oscillator_params compares with stand_threshold: |v_x|, or for 'command' the
+    largest of |v_x| [m/s], |v_y| [m/s] and |yaw rate| [rad/s]."""
+    if rule == "lin_vel_x":
+        return command[:, 0].abs()
+    if rule == "command":
+        return command.abs().amax(dim=1)
+    raise ValueError(f"unknown standing rule {rule!r}; known: {', '.join(STANDING_RULES)}")
 
 
 def oscillator_velocity(phase, grf, omega, coupling, offset):
@@ -55,10 +69,12 @@ def oscillator_params(
     coupling_noise_std: float = 0.0,
     generator: torch.Generator | None = None,
     coupling_enabled: bool = True,
+    stand_speed: torch.Tensor | None = None,
 ):
     """Schedule (omega [Hz], sigma, xi) from the commanded forward speed; each (num_envs, 1).
 
-    Standing (|v| < stand_threshold, strict as in the released code): (1, 4, 1).
+    Standing (stand_speed < stand_threshold, strict as in the released code; stand_speed defaults to
+    |v|, see standing_speed): (1, 4, 1).
     Moving: (min(|v| + 1.5, 4), coupling_max, 0). The released code used min(1, coupling_max); the two
     agree for coupling_max <= 1, and using it directly lets evaluation sweep sigma above 1.
     Training jitter N(0, std^2) is added to omega and sigma, then omega >= 0.1 and sigma >= 0.
@@ -69,7 +85,7 @@ def oscillator_params(
     if not torch.is_floating_point(v):
         v = v.float()
     speed = v.abs()
-    standing = speed < stand_threshold
+    standing = (speed if stand_speed is None else stand_speed.reshape(-1, 1)) < stand_threshold
 
     omega = torch.where(
         standing,

@@ -86,6 +86,7 @@ def deployment_metadata(task, checkpoint: str = "") -> dict:
             "coupling_enabled": bool(task.orc.coupling),
             "coupling_max": float(osc.coupling_max),
             "stand_threshold": float(osc.stand_threshold),
+            "standing_rule": str(osc.standing_rule),
             "standing": {"omega": oscillators.STANDING_OMEGA, "sigma": oscillators.STANDING_COUPLING,
                          "xi": oscillators.STANDING_OFFSET},
             "moving": {"omega": f"min(|v_x| + {oscillators.MOVING_OMEGA_BIAS}, {oscillators.MOVING_OMEGA_MAX})",
@@ -130,6 +131,7 @@ class Controller(nn.Module):
         self.grf_normaliser = float(task.grf_normaliser)
         self.coupling_max = float(cfg.osc.coupling_max)
         self.stand_threshold = float(cfg.osc.stand_threshold)
+        self.standing_rule = str(cfg.osc.standing_rule)
         self.coupling_enabled = bool(task.orc.coupling)
 
     def forward(self, base_ang_vel, projected_gravity, joint_pos, joint_vel, previous_joint_targets, foot_forces,
@@ -138,6 +140,7 @@ class Controller(nn.Module):
         omega, coupling, offset = oscillators.oscillator_params(
             command[:, 0], coupling_max=self.coupling_max, stand_threshold=self.stand_threshold,
             coupling_enabled=self.coupling_enabled,
+            stand_speed=oscillators.standing_speed(command, self.standing_rule),
         )
         new_phase, phase_vel = oscillators.integrate_phases(phase, grf, omega, coupling, offset, self.physics_dt)
         readings = {

@@ -24,9 +24,9 @@ def osc_env(num_envs=4, overrides=(), **osc):
     return make_env("mini_cheetah_osc", apply_overrides(cfg, list(overrides)))
 
 
-def quiet_standing(num_envs=4, **osc):
+def quiet_standing(num_envs=4, overrides_extra=(), **osc):
     """Standing command, no noise, jitter, pushes or command changes: the evaluation setting."""
-    overrides = [
+    overrides = [*overrides_extra, 
         "observations.noise_scale=0", "osc.process_noise_std=0", "osc.omega_noise_std=0",
         "osc.coupling_noise_std=0", "push.enabled=false", "commands.resampling_time_s=1000",
         "env.episode_length_s=1000", "init_state.mode=default",
@@ -175,13 +175,33 @@ def test_tracking_orientation_and_height_rewards():
     env.base_lin_vel = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     track = env._reward_tracking_lin_vel()
     assert track[0] == pytest.approx(1.0) and track[1] == pytest.approx(math.exp(-(0.5**2) / 0.25))
-    env.base_ang_vel = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    yaw = env._reward_tracking_ang_vel()
-    assert yaw[0] == pytest.approx(1.0) and yaw[1] == pytest.approx(math.exp(-((1 / 5) ** 4) / 0.25))
     env.projected_gravity = torch.tensor([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
     assert env._reward_orientation().tolist() == pytest.approx([2.0, 1.0 + math.exp(-4.0)])
     env.state.base_pos[:, 2] = torch.tensor([0.40, 0.06])
     assert env._reward_min_base_height().tolist() == pytest.approx([1.0, math.exp(-1.0 / 0.25)])
+
+
+def test_yaw_tracking_pays_for_a_1_rad_s_error_unless_the_released_quartic_is_asked_for():
+    def yaw_reward(form):
+        env = quiet_standing(3, overrides_extra=[f"rewards.yaw_tracking={form}"])
+        env.commands[:] = torch.tensor([[1.0, 0.0, 0.0], [1.0, 0.0, 1.0], [0.0, 0.0, 3.0]])
+        env.base_ang_vel = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+        return env._reward_tracking_ang_vel().tolist()
+    # Relative to the command's size, like the linear term: exp(-(e / (1 + |c|))^2 / 0.25).
+    assert yaw_reward("sqexp") == pytest.approx([1.0, math.exp(-(0.5**2) / 0.25), math.exp(-(0.75**2) / 0.25)])
+    assert yaw_reward("sqexp")[2] > 0.1  # standing still under a 3 rad/s command still has a gradient
+    quartic = yaw_reward("released_quartic")
+    assert quartic[1] == pytest.approx(math.exp(-((1 / 5) ** 4) / 0.25)) and quartic[1] > 0.99
+
+
+def test_the_standing_schedule_reads_the_whole_command_when_asked():
+    commands = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, -1.5], [0.0, 0.5, 0.0], [1.0, 0.0, 0.0]])
+    for rule, standing in (("lin_vel_x", [True, True, True, False]), ("command", [True, False, False, False])):
+        env = quiet_standing(4, overrides_extra=[f"osc.standing_rule={rule}"])
+        env.commands[:] = commands
+        env._pre_physics_step()
+        assert (env.coupling[:, 0] == oscillators.STANDING_COUPLING).tolist() == standing, rule
+        assert env.omega[1, 0] == pytest.approx(1.0 if rule == "lin_vel_x" else 1.5)  # turning on the spot: |v_x| + 1.5
 
 
 def test_penalties_are_negative_and_scaled():
