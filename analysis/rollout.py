@@ -387,13 +387,15 @@ def _push_plan(n, push_step, push_delta) -> dict[int, tuple[np.ndarray, np.ndarr
 
 @dataclass
 class Job:
-    """num_envs robots of one policy, optionally with a per-robot push schedule (see `rollout`)."""
+    """num_envs robots of one policy, optionally with a per-robot push schedule (see `rollout`) and a
+    command of its own (v_x, v_y, yaw rate) instead of run_jobs' common one."""
 
     run: PolicyRun
     num_envs: int
     push_step: np.ndarray | None = None
     push_delta: np.ndarray | None = None
     tag: Any = None  # free label for the caller (e.g. the push magnitude)
+    command: tuple[float, float, float] | None = None
 
 
 def run_jobs(
@@ -435,9 +437,11 @@ def run_jobs(
         total = sum(counts)
         cfg = apply_overrides(cfgs[members[0]], [f"env.num_envs={total}", f"env.seed={seed + b}"])
         push_step, push_delta = _stack_pushes([jobs[i] for i in members])
+        commands = np.concatenate([np.tile(np.asarray(command if jobs[i].command is None else jobs[i].command,
+                                                      dtype=np.float32), (jobs[i].num_envs, 1)) for i in members])
         tag = f"{label}, batch {b + 1}/{len(batches)}" if len(batches) > 1 else label
         out = rollout(
-            StackedPolicy([jobs[i].run.policy for i in members], counts), cfg, num_steps, command, command_step,
+            StackedPolicy([jobs[i].run.policy for i in members], counts), cfg, num_steps, commands, command_step,
             record, record_from, push_step, push_delta, jobs[members[0]].run.task, progress, f"{tag} ({total} robots)",
         )
         offsets = np.concatenate([[0], np.cumsum(counts)])

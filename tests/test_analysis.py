@@ -304,3 +304,30 @@ def test_one_sample_is_decided_from_the_policys_inputs():
     assert not np.array_equal(out[1].data["phase"][1], out[1].data["phase"][0])
     seen = run_jobs([Job(seeing, 3)], 5, record=("grf", "terminated"), num_threads=1, progress=False)[0]
     assert seen.sample.tolist() == [0, 1, 2] and not seen.robots_alike()
+
+
+def test_envelope_scores_tracking_per_axis_falls_and_standing():
+    from analysis import envelope
+    from analysis.rollout import Rollout
+
+    t, n = 500, 2
+    lin, ang = np.zeros((n, t, 3)), np.zeros((n, t, 3))
+    lin[0, :, 0], lin[1, :, 0] = 1.0, 0.6  # robot 1 is 0.4 m/s slow
+    ang[:, :, 2] = 0.9
+    data = {"grf": np.zeros((n, t, 4)), "base_lin_vel": lin, "base_ang_vel": ang, "terminated": np.zeros((n, t), bool)}
+    r = envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "walk and turn", (1.0, 0.0, 1.0))
+    assert r.tracked == pytest.approx((0.8, 0.0, 0.9)) and r.error == pytest.approx((0.2, 0.0, 0.1))
+    assert r.met and r.gaits == {envelope.NO_STEPS: 1.0}  # no footfalls: it stood
+    data["terminated"][1, 100] = True
+    assert not envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).met
+    lin[1, :, 0] = 0.0  # robot 1 does not walk: mean error 0.5 > 0.25
+    data["terminated"][:] = False
+    assert not envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).met
+
+
+def test_jobs_can_carry_their_own_command():
+    run = _tiny_run("111")
+    out = run_jobs([Job(run, 2, command=(0.0, 0.0, 1.5)), Job(run, 2)], 3, command=(1.0, 0.0, 0.0),
+                   record=("command", "terminated"), num_threads=1, progress=False)
+    assert out[0].data["command"][:, -1].tolist() == [[0.0, 0.0, 1.5]] * 2
+    assert out[1].data["command"][:, -1].tolist() == [[1.0, 0.0, 0.0]] * 2
