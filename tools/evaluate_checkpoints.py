@@ -1,0 +1,63 @@
+"""The recipe study's measurement of a training run's checkpoints: command envelope and oscillator obedience.
+
+    python tools/evaluate_checkpoints.py logs/study/E15/<run> --every 100
+    python tools/evaluate_checkpoints.py <run> --checkpoints 400 800
+
+For each checkpoint (all checkpoints batched together, 16 robots per measurement by default):
+  - the command envelope (analysis.envelope): every command of ENVELOPE at the trained coupling from
+    random phases, 8 s after a 2 s start; how many commands are met (each axis within 0.25, no falls);
+  - obedience (analysis.obedience): sigma = 0, oscillators started in trot / pace / bound / pronk at
+    1 m/s, share walking that gait at 10 s; sigma = 1 from random phases, share regular at 10 s.
+One summary line per checkpoint on stdout, then every envelope line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from analysis import envelope, obedience
+from analysis.rollout import PolicyRun
+from learning import runs
+
+
+def checkpoint_runs(run_dir: str, checkpoints: list[int]) -> list[PolicyRun]:
+    out = []
+    for it in checkpoints:
+        loaded = runs.load_policy(run_dir, it)
+        out.append(PolicyRun(f"it {it}", loaded.env_cfg, loaded.policy, path=run_dir))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir")
+    parser.add_argument("--every", type=int, default=100, help="every this many iterations (default 100)")
+    parser.add_argument("--checkpoints", type=int, nargs="*", default=None, help="these iterations instead")
+    parser.add_argument("--robots", type=int, default=16)
+    parser.add_argument("--num_threads", type=int, default=0)
+    args = parser.parse_args(argv)
+
+    available = runs.list_checkpoints(args.run_dir)
+    wanted = args.checkpoints if args.checkpoints else [it for it in available if it > 0 and it % args.every == 0]
+    missing = sorted(set(wanted) - set(available))
+    if missing or not wanted:
+        print(f"evaluate_checkpoints: error: no checkpoints {missing or wanted} in {args.run_dir} "
+              f"(it has {available})", file=sys.stderr)
+        return 1
+    policies = checkpoint_runs(args.run_dir, wanted)
+    env_results = envelope.measure(policies, robots=args.robots, num_threads=args.num_threads,
+                                   **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
+    obeyed = obedience.measure(policies, robots=args.robots, settle_robots=args.robots, settle_duration_s=10.0,
+                               num_threads=args.num_threads)
+    for policy, ob in zip(policies, obeyed):
+        rows = [r for r in env_results if r.policy == policy.name]
+        missed = [f"{r.name} ({max(r.error):.2f}{', falls' if r.falls else ''})" for r in rows if not r.met]
+        print(f"{policy.name} | envelope met {len(rows) - len(missed)}/{len(rows)}"
+              f"{' | missed: ' + '; '.join(missed) if missed else ''} | {ob.summary()}", flush=True)
+    print("\n".join(envelope.summary_lines(env_results)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
