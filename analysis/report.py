@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis import balanced_legs, disturbance, fixed_points, gait, gait_emergence, obedience, pace_to_trot
+from analysis import balanced_legs, disturbance, envelope, fixed_points, gait, gait_emergence, obedience, pace_to_trot
 from gym_envs.config import ConfigError
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
 from analysis.plotting import LEG_NAMES, sort_configs
@@ -159,10 +159,11 @@ def build(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalS
         pt = {"files": {}, "skipped": "no ORC(111) policy among the runs"}
     del collected
     ob = obedience.run(policies, out, quick, settings, seed, progress=progress)
+    ev = envelope.run(policies, out, quick, settings, seed, progress=progress)
     db = disturbance.run(policies, out, quick, settings, seed, push_slots=push_slots, progress=progress)
 
     results = {"fixed_points": fp, "balanced_legs": bl, "gait_emergence": ge, "pace_to_trot": pt,
-               "obedience": ob, "disturbance": db}
+               "obedience": ob, "envelope": ev, "disturbance": db}
     text = render(policies, results, quick, settings, seed, source, started)
     report_path = out / "report.md"
     report_path.write_text(text)
@@ -202,6 +203,7 @@ def render(policies, results: dict, quick: bool, settings: EvalSettings, seed: i
     md += _section_emergence(ge)
     md += _section_pace(pt)
     md += _section_obedience(ob)
+    md += _section_envelope(results["envelope"])
     md += _section_disturbance(db)
     md += _section_fixed_points(fp)
     md += ["## Files", ""]
@@ -309,6 +311,20 @@ def _section_obedience(ob: dict) -> list[str]:
                            "GRF in stance half", "contact/oscillator agreement", "σ = 1: regular at 10 s",
                            "σ = 1: final gaits", "σ = 1: median settle", "σ = 1: GRF share " + "/".join(LEG_NAMES),
                            "falls"], rows), ""]
+    return md
+
+
+def _section_envelope(ev: dict) -> list[str]:
+    s = ev["sizes"]
+    md = ["## 4b. Command envelope (ours; the paper trains v_x, v_y and yaw rate over its whole range)", "",
+          f"Per policy and command (v_x, v_y, yaw rate): {s['robots']} robots from random phases at the trained "
+          f"coupling, {s['measure_s']:g} s after a {s['warmup_s']:g} s start; the tracked mean of each axis, whether "
+          f"every axis is within {envelope.TOLERANCE:g} (m/s or rad/s) with no falls, and the contact gait at the end "
+          f"(\"{envelope.NO_STEPS}\": a leg did not land twice, e.g. standing). CSV: `envelope.csv`.", ""]
+    rows = [[r.orc, r.policy, r.name, " / ".join(f"{x:+.2f}" for x in r.tracked), f"{max(r.error):.2f}",
+             "yes" if r.met else "no", r.falls, gait.mix_text(r.gaits, r.alike)] for r in ev["results"]]
+    md += [markdown_table(["ORC", "policy", "command", "tracked v_x / v_y / yaw", "max error", "met", "falls",
+                           "gait (contacts)"], rows), ""]
     return md
 
 

@@ -322,7 +322,10 @@ def test_envelope_scores_tracking_per_axis_falls_and_standing():
     assert not envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).met
     lin[1, :, 0] = 0.0  # robot 1 does not walk: mean error 0.5 > 0.25
     data["terminated"][:] = False
-    assert not envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).met
+    missed = envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0))
+    assert not missed.met
+    section = "\n".join(report._section_envelope({"sizes": envelope.PROTOCOL, "results": [r, missed]}))
+    assert "| walk and turn | +0.80 / +0.00 / +0.90 | 0.20 | yes |" in section and "| x | +0.50" in section
 
 
 def test_jobs_can_carry_their_own_command():
