@@ -317,7 +317,9 @@ def test_envelope_scores_tracking_per_axis_falls_and_standing():
     data = {"grf": np.zeros((n, t, 4)), "base_lin_vel": lin, "base_ang_vel": ang, "terminated": np.zeros((n, t), bool)}
     r = envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "walk and turn", (1.0, 0.0, 1.0))
     assert r.tracked == pytest.approx((0.8, 0.0, 0.9)) and r.error == pytest.approx((0.2, 0.0, 0.1))
-    assert r.met and r.gaits == {envelope.NO_STEPS: 1.0}  # no footfalls: it stood
+    assert r.met and r.gaits == {envelope.NO_STEPS: 1.0} and r.step_frequency == 0.0  # no footfalls: it stood
+    data["grf"][:, 50::100, :] = 0.5  # one touchdown per second per foot (10 ms loads, 0.99 s unloaded)
+    assert envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).step_frequency == 1.0
     data["terminated"][1, 100] = True
     assert not envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).met
     lin[1, :, 0] = 0.0  # robot 1 does not walk: mean error 0.5 > 0.25
@@ -326,6 +328,7 @@ def test_envelope_scores_tracking_per_axis_falls_and_standing():
     assert not missed.met
     section = "\n".join(report._section_envelope({"sizes": envelope.PROTOCOL, "results": [r, missed]}))
     assert "| walk and turn | +0.80 / +0.00 / +0.90 | 0.20 | yes |" in section and "| x | +0.50" in section
+    assert section.rstrip().endswith("| 1.0 |")
 
 
 def test_jobs_can_carry_their_own_command():
