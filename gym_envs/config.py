@@ -240,7 +240,14 @@ def _build(cls: type, data: Mapping, path: str, base: Any, complete: bool = Fals
             continue
         value = data[f.name]
         default = getattr(base, f.name) if base is not None else _field_default(f)
-        if isinstance(value, Mapping) and dataclasses.is_dataclass(default) and not isinstance(default, type):
+        is_section = dataclasses.is_dataclass(default) and not isinstance(default, type)
+        if complete and value is None and type(None) not in typing.get_args(hints[f.name]):
+            # A file cut right after 'key:' leaves None, which save_yaml never writes there: for a section or a
+            # dict, name the first key it lacks.
+            entries = [x.name for x in _init_fields(type(default))] if is_section else \
+                list(default) if isinstance(default, Mapping) else []
+            raise _missing_key(_join(key, entries[0]) if entries else key)
+        if isinstance(value, Mapping) and is_section:
             kwargs[f.name] = _build(type(default), value, key, base=default, complete=complete)
         else:
             if complete and isinstance(value, Mapping) and isinstance(default, Mapping):
