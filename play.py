@@ -42,6 +42,7 @@ oscillator tasks controller.onnx is the whole controller in one graph (raw readi
 foot forces, command and phases in; joint targets and new phases out; see learning/export.py).
 
 Every flag and config value is checked before anything is built; a bad one is one line on stderr.
+Ctrl-C stops the rollout, prints the summary so far and exits with status 130.
 """
 
 from __future__ import annotations

@@ -9,7 +9,9 @@ interrupted one in place from its newest checkpoint (its configs must match the 
 <out>/manifest.csv lists configuration, seed, iterations, wall time, final reward and final
 tracking error (mean |command - velocity| of the last episodes) of every run; it is rewritten
 after each run. Ctrl-C stops the current run with a checkpoint and ends the sweep (exit 130).
-Every run's flags and config values are checked before the first folder is made.
+Every run's flags and config values are checked before the first folder is made. A sweep holds a
+lock on <out> (and on the run it trains) until it ends: a second sweep into the same <out>, or a
+train.py --resume of the run being trained, is refused with the sweep's pid.
 """
 
 from __future__ import annotations
