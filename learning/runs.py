@@ -235,8 +235,8 @@ def load_checkpoint(path: str, map_location: str | torch.device | None = None) -
         folder = os.path.dirname(os.path.abspath(path))
         others = [it for it in list_checkpoints(folder) if checkpoint_path(folder, it) != os.path.abspath(path)]
         raise RunError(f"refused checkpoint {path}: tensor {bad[0]} holds {bad[1]} NaN or infinite values (training "
-                       f"diverged before this save); use an earlier checkpoint with --checkpoint N"
-                       + (f" (others in its run: {', '.join(map(str, others))})" if others else ""))
+                       f"diverged before this save); remove it, or pick an earlier one with play.py/train.py "
+                       f"--checkpoint N" + (f" (its run also has {', '.join(map(str, others))})" if others else ""))
     return data
 
 

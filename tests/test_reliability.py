@@ -158,7 +158,7 @@ def test_a_nan_checkpoint_is_refused_by_play_export_analysis_and_resume(run_copy
     for argv in (play_argv, play_argv + ["--export"]):
         assert play.main(argv) == 1
         err = one_line(capsys)
-        assert refusal in err and "--checkpoint N (others in its run: 0)" in err
+        assert refusal in err and "--checkpoint N (its run also has 0)" in err
     assert balanced_legs.main(["--runs", run_copy, "--out", str(tmp_path / "out"), "--quick"]) == 1
     assert refusal in one_line(capsys)
     assert resume(run_copy, tmp_path / "resumed") == 1
