@@ -42,13 +42,18 @@ oscillator tasks controller.onnx is the whole controller in one graph (raw readi
 foot forces, command and phases in; joint targets and new phases out; see learning/export.py).
 
 Every flag and config value is checked before anything is built; a bad one is one line on stderr.
+Ctrl-C stops the rollout, prints the summary so far and exits with status 130.
 """
 
 from __future__ import annotations
 
-import sys
+from learning.startup import quiet_ctrl_c_at_startup
 
-from learning.video import VideoRecorder, has_display, prefer_offscreen_gl
+quiet_ctrl_c_at_startup()  # before the slow imports below
+
+import sys  # noqa: E402
+
+from learning.video import VideoRecorder, has_display, prefer_offscreen_gl  # noqa: E402
 
 prefer_offscreen_gl()  # must run before mujoco is imported
 _HAS_DISPLAY = has_display()
@@ -354,6 +359,7 @@ def _main(args) -> int:
         tracker = Tracker(dt, session.env.num_envs)
         obs = session.env.get_observations()
         step = 0
+        interrupted = False
         wall_start = time.perf_counter()
         try:
             while steps is None or step < steps:
@@ -370,7 +376,8 @@ def _main(args) -> int:
                     if lag > 0:
                         time.sleep(lag)
                 step += 1
-        except KeyboardInterrupt:
+        except KeyboardInterrupt:  # the summary of what ran is still printed; the status says it was cut short
+            interrupted = True
             print("interrupted")
         tracker.flush(session.task)
         if tracker.history:
@@ -378,7 +385,7 @@ def _main(args) -> int:
                   f"{step * dt:.2f} s; {tracker.total_falls} falls")
         if video is not None:
             print(f"video {args.video}: {video.frames} frames")
-        return 0
+        return cli.EXIT_INTERRUPTED if interrupted else 0
     finally:
         if video is not None:
             video.close()

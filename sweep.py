@@ -9,25 +9,31 @@ interrupted one in place from its newest checkpoint (its configs must match the 
 <out>/manifest.csv lists configuration, seed, iterations, wall time, final reward and final
 tracking error (mean |command - velocity| of the last episodes) of every run; it is rewritten
 after each run. Ctrl-C stops the current run with a checkpoint and ends the sweep (exit 130).
-Every run's flags and config values are checked before the first folder is made.
+Every run's flags and config values are checked before the first folder is made. A sweep holds a
+lock on <out> (and on the run it trains) until it ends: a second sweep into the same <out>, or a
+train.py --resume of the run being trained, is refused with the sweep's pid.
 """
 
 from __future__ import annotations
 
-import csv
-import glob
-import os
-import sys
-import time
+from learning.startup import quiet_ctrl_c_at_startup
 
-import yaml
+quiet_ctrl_c_at_startup()  # before the slow imports below
 
-import train
-from gym_envs.config import ConfigError, apply_overrides, load_yaml, save_yaml, to_dict
-from gym_envs.files import atomic_write
-from gym_envs.orc import PAPER_CONFIGURATIONS
-from learning import cli, runs
-from learning.runner import StopRequest
+import csv  # noqa: E402
+import glob  # noqa: E402
+import os  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+import yaml  # noqa: E402
+
+import train  # noqa: E402
+from gym_envs.config import ConfigError, apply_overrides, to_dict  # noqa: E402
+from gym_envs.files import atomic_write  # noqa: E402
+from gym_envs.orc import PAPER_CONFIGURATIONS  # noqa: E402
+from learning import cli, runs  # noqa: E402
+from learning.runner import StopRequest  # noqa: E402
 
 MANIFEST = "manifest.csv"
 STATUS = "sweep_status.yaml"
@@ -73,40 +79,43 @@ def train_one(args, orc: str, seed: int) -> str:
     setup = train.prepare(train.build_parser().parse_args(train_args(args, orc, seed)))
     env_cfg, train_cfg, runner = setup.env_cfg, setup.train_cfg, setup.runner
     done = runs.list_checkpoints(run_dir) if os.path.isdir(run_dir) else []
-    status = load_yaml_dict(os.path.join(run_dir, STATUS))
     if done:
         _check_same_configs(run_dir, env_cfg, train_cfg)
         if max(done) >= train_cfg.max_iterations:
-            return "skipped"
-        runner.load(runs.checkpoint_path(run_dir, max(done)), context=f"ORC {orc} seed {seed}")
-        print(f"resuming {run_dir} from iteration {max(done)}", flush=True)
-    else:
-        os.makedirs(run_dir, exist_ok=True)
-        save_yaml(env_cfg, os.path.join(run_dir, runs.ENV_YAML))
-        save_yaml(train_cfg, os.path.join(run_dir, runs.TRAIN_YAML))
-        print(f"training {run_dir}", flush=True)
-    runner.attach_run_dir(run_dir, progress_prefix=f"[ORC_{orc} seed{seed}] ")
-    start = time.perf_counter()
-    with StopRequest() as stop:
-        finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
-    logger = runner.logger
-    status = {
-        "orc": orc,
-        "seed": seed,
-        "iterations": runner.current_learning_iteration,
-        "wall_time_s": round(float(status.get("wall_time_s", 0.0)) + time.perf_counter() - start, 1),
-        "final_reward": logger.last_reward if logger.last_reward is not None else status.get("final_reward"),
-        "tracking_error": (logger.last_tracking_error if logger.last_tracking_error is not None
-                           else status.get("tracking_error")),
-    }
-    save_status(status, os.path.join(run_dir, STATUS))
-    return "finished" if finished else "stopped"
+            return "skipped"  # read only: a finished run is left exactly as it is
+    os.makedirs(run_dir, exist_ok=True)
+    # Held while the run is written, so that train.py --resume of it is refused (the sweep's own lock on --out
+    # keeps other sweeps out).
+    with runs.FolderLock(run_dir, "resume it with this sweep when that process has ended, or choose another --out"):
+        status = load_yaml_dict(os.path.join(run_dir, STATUS))
+        if done:
+            runner.load(runs.checkpoint_path(run_dir, max(done)), context=f"ORC {orc} seed {seed}")
+            print(f"resuming {run_dir} from iteration {max(done)}", flush=True)
+        else:
+            runs.save_run_configs(run_dir, env_cfg, train_cfg)
+            print(f"training {run_dir}", flush=True)
+        runner.attach_run_dir(run_dir, progress_prefix=f"[ORC_{orc} seed{seed}] ")
+        start = time.perf_counter()
+        with StopRequest() as stop:
+            finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
+        logger = runner.logger
+        status = {
+            "orc": orc,
+            "seed": seed,
+            "iterations": runner.current_learning_iteration,
+            "wall_time_s": round(float(status.get("wall_time_s", 0.0)) + time.perf_counter() - start, 1),
+            "final_reward": logger.last_reward if logger.last_reward is not None else status.get("final_reward"),
+            "tracking_error": (logger.last_tracking_error if logger.last_tracking_error is not None
+                               else status.get("tracking_error")),
+        }
+        save_status(status, os.path.join(run_dir, STATUS))
+        return "finished" if finished else "stopped"
 
 
 def _check_same_configs(run_dir: str, env_cfg, train_cfg) -> None:
     """A run is only continued with the settings it was started with (iterations aside)."""
-    saved_env = to_dict(load_yaml(type(env_cfg), os.path.join(run_dir, runs.ENV_YAML)))
-    saved_train = load_yaml(type(train_cfg), os.path.join(run_dir, runs.TRAIN_YAML))
+    saved_env = to_dict(runs.load_run_yaml(run_dir, type(env_cfg), runs.ENV_YAML))
+    saved_train = runs.load_run_yaml(run_dir, type(train_cfg), runs.TRAIN_YAML)
     saved_train = to_dict(apply_overrides(saved_train, [f"max_iterations={train_cfg.max_iterations}"]))
     for name, saved, now in (("env", saved_env, to_dict(env_cfg)), ("train", saved_train, to_dict(train_cfg))):
         if saved != now:
@@ -167,14 +176,15 @@ def _main(args) -> int:
         for seed in args.seeds:
             train.resolve(train.build_parser().parse_args(train_args(args, orc, seed)))
     os.makedirs(args.out, exist_ok=True)
-    for orc in args.orcs:
-        for seed in args.seeds:
-            outcome = train_one(args, orc, seed)
-            print(f"ORC {orc} seed {seed}: {outcome}", flush=True)
-            write_manifest(args.out)
-            if outcome == "stopped":
-                return train.EXIT_INTERRUPTED
-    print(f"manifest: {write_manifest(args.out)}")
+    with runs.FolderLock(args.out, "wait for that sweep to end (or stop it), or choose another --out"):
+        for orc in args.orcs:
+            for seed in args.seeds:
+                outcome = train_one(args, orc, seed)
+                print(f"ORC {orc} seed {seed}: {outcome}", flush=True)
+                write_manifest(args.out)
+                if outcome == "stopped":
+                    return train.EXIT_INTERRUPTED
+        print(f"manifest: {write_manifest(args.out)}")
     return 0
 
 

@@ -19,7 +19,9 @@ iterations; model_0 is the initial policy) and tensorboard events. The experimen
 ORC_<orc> for oscillator tasks (else the task name) and the run name to seed<seed>.
 
 Resuming (--resume) loads a checkpoint and writes a *new* run folder: the old run is never
-modified, and the new one records `resumed_from`. The env and train configs are the old run's
+modified (beyond removing the temporary file of a save that was killed), and the new one records
+`resumed_from`. A run that is still being written (its process holds <run>/.lock) is not resumed:
+the error names that process. The env and train configs are the old run's
 YAMLs, changed by any options given now. The iteration count continues (the next iteration after
 model_500.pt is number 501, its tensorboard step 500), so the two folders' curves join up when
 tensorboard shows the experiment folder.
@@ -70,18 +72,23 @@ before all exit.
 
 from __future__ import annotations
 
-import argparse
-import copy
-import os
-import random
-import sys
-from dataclasses import dataclass
-from typing import Any
+from learning.startup import quiet_ctrl_c_at_startup
 
-from gym_envs.config import ConfigError
-from learning import cli
+quiet_ctrl_c_at_startup()  # before the slow imports below
+
+import argparse  # noqa: E402
+import copy  # noqa: E402
+import os  # noqa: E402
+import random  # noqa: E402
+import sys  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from typing import Any  # noqa: E402
+
+from gym_envs.config import ConfigError  # noqa: E402
+from learning import cli  # noqa: E402
 
 EXIT_INTERRUPTED = cli.EXIT_INTERRUPTED
+RESUME_LIVE_FIX = "resume it when that process has ended (or stop it first), or choose another run with --load_run"
 
 
 def build_parser() -> cli.Parser:
@@ -176,6 +183,7 @@ def resolve(args: argparse.Namespace) -> Plan:
     resume_from = trained_env_cfg = None
     if args.resume:
         run_dir = runs.find_run(log_root, args.load_run, experiment=args.experiment_name, task=args.task, orc=args.orc)
+        runs.check_not_in_use(run_dir, RESUME_LIVE_FIX)
         resume_from = runs.find_checkpoint(run_dir, args.checkpoint)
         task, env_cfg, train_cfg = runs.load_run_configs(run_dir)
         trained_env_cfg = env_cfg
@@ -290,7 +298,6 @@ def main(argv: list[str] | None = None) -> int:
 def _main(args: argparse.Namespace) -> int:
     import torch
 
-    from gym_envs.config import save_yaml
     from learning import distributed, runs
     from learning.machine import expected_duration
     from learning.runner import StopRequest
@@ -300,6 +307,7 @@ def _main(args: argparse.Namespace) -> int:
 
         prefer_offscreen_gl()  # before mujoco is imported
     threads_before = torch.get_num_threads()
+    lock = None
     try:
         if args.num_threads:
             torch.set_num_threads(args.num_threads)
@@ -317,10 +325,10 @@ def _main(args: argparse.Namespace) -> int:
         distributed.barrier()  # every rank has read the runs it resumes before rank 0 adds a folder
         if setup.rank == 0:
             if plan.resume_from:
-                runs.remove_stale_temps(os.path.dirname(plan.resume_from))
+                runs.remove_stale_temps_of_idle_run(os.path.dirname(plan.resume_from), RESUME_LIVE_FIX)
             run_dir = runs.create_run_dir(setup.log_root, train_cfg.experiment_name, train_cfg.run_name)
-            save_yaml(env_cfg, os.path.join(run_dir, runs.ENV_YAML))
-            save_yaml(train_cfg, os.path.join(run_dir, runs.TRAIN_YAML))
+            lock = runs.FolderLock(run_dir, "it is a new folder; nothing else should write it")
+            runs.save_run_configs(run_dir, env_cfg, train_cfg)
             runner.attach_run_dir(run_dir, progress_prefix=f"[{train_cfg.experiment_name}] ")
             resuming = f" (resuming {train_cfg.resumed_from})" if train_cfg.resumed_from else ""
             print(setup.defaults.describe(env_cfg.sim.backend))
@@ -340,6 +348,8 @@ def _main(args: argparse.Namespace) -> int:
             print(f"stopped at iteration {runner.current_learning_iteration}; saved {saved}", flush=True)
         return EXIT_INTERRUPTED
     finally:
+        if lock is not None:
+            lock.release()
         torch.set_num_threads(threads_before)
         distributed.shut_down()
 

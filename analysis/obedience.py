@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -230,9 +231,9 @@ def plot(results: list[Obedience]):
     return fig
 
 
-def main(argv=None):
-    cli_main(__doc__.splitlines()[0], run, argv)
+def main(argv=None) -> int:
+    return cli_main("analysis.obedience", __doc__, run, argv)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

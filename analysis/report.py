@@ -20,9 +20,11 @@ import numpy as np
 from analysis import balanced_legs, disturbance, envelope, fixed_points, gait, gait_emergence, obedience, pace_to_trot
 from gym_envs.config import ConfigError
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
+from learning.runs import scan_runs
 from analysis.plotting import LEG_NAMES, sort_configs
 from analysis.rollout import (
     DEFAULT_TASK,
+    SHIPPED_POLICIES,
     EvalSettings,
     build_parser,
     eval_overrides,
@@ -371,7 +373,11 @@ def main(argv=None) -> int:
         policies = runs_from_args(args)
         if not any(p.task == DEFAULT_TASK for p in policies):
             raise ConfigError(f"no {DEFAULT_TASK} runs (env.yaml with osc.orc) in {args.runs or 'the shipped policies'}")
+        cli.check_writable(args.out)
         source = f"runs in {args.runs}" if args.runs else "shipped policies (resources/policies)"
+        skipped = scan_runs(args.runs or SHIPPED_POLICIES)[1]
+        if skipped:
+            source += " (skipped, not complete runs: " + "; ".join(f"{path}: {lacks}" for path, lacks in skipped) + ")"
         result = build(policies, args.out, quick=args.quick, seed=args.seed, source=source,
                        settings=EvalSettings(process_noise_std=args.process_noise), push_slots=args.push_slots)
         print(f"report: {result['report']}")

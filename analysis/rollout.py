@@ -125,26 +125,17 @@ def load_runs(root: str | None = None) -> list[PolicyRun]:
     root = SHIPPED_POLICIES if root is None else root
     if not os.path.isdir(root):
         raise FileNotFoundError(f"runs folder {root} does not exist")
-    run_dirs = find_run_dirs(root)
+    from learning.runs import scan_runs
+
+    run_dirs, skipped = scan_runs(root)
+    for path, lacks in skipped:  # a run still starting, or a damaged one: said, never passed over in silence
+        print(f"skipped {path}: {lacks}", file=sys.stderr)
     if not run_dirs:
         raise FileNotFoundError(
             f"no runs in {root}: expected run folders (env.yaml with osc.orc, train.yaml, model_<it>.pt) "
             f"at most two levels down, e.g. {root}/<experiment>/<date>_<run>/"
         )
     return [load_policy_run(d) for d in run_dirs]
-
-
-def find_run_dirs(root: str, depth: int = 2) -> list[str]:
-    """Folders with an env.yaml that are root itself or at most `depth` levels below it, sorted by path."""
-    if os.path.isfile(os.path.join(root, "env.yaml")):
-        return [os.path.abspath(root)]
-    found = []
-    if depth > 0:
-        for name in sorted(os.listdir(root)):
-            sub = os.path.join(root, name)
-            if os.path.isdir(sub):
-                found += find_run_dirs(sub, depth - 1)
-    return found
 
 
 def load_policy_run(run_dir: str) -> PolicyRun:
@@ -521,6 +512,7 @@ def cli_main(prog: str, description: str, run_fn, argv=None, pushes: bool = Fals
 
     def body(args) -> int:
         runs = runs_from_args(args)
+        cli.check_writable(args.out)  # before the rollouts, which take minutes
         settings = EvalSettings(process_noise_std=args.process_noise)
         extra = {"push_slots": args.push_slots} if pushes else {}
         summary = run_fn(runs, args.out, quick=args.quick, settings=settings, seed=args.seed, **extra)

@@ -20,7 +20,6 @@ and obeys, or after --max_minutes.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 import time
@@ -31,7 +30,6 @@ import train
 from analysis import obedience
 from analysis.locomotion import check_locomotion
 from analysis.rollout import PolicyRun
-from gym_envs.config import save_yaml
 from learning import runs
 from learning.runs import DeterministicActor
 
@@ -74,8 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     setup = train.prepare(train.build_parser().parse_args(train_argv))
     runner, env_cfg, train_cfg = setup.runner, setup.env_cfg, setup.train_cfg
     run_dir = runs.create_run_dir(log_root, "time_to_obedience", f"{args.profile}_seed{args.seed}")
-    save_yaml(env_cfg, os.path.join(run_dir, runs.ENV_YAML))
-    save_yaml(train_cfg, os.path.join(run_dir, runs.TRAIN_YAML))
+    lock = runs.FolderLock(run_dir, "it is a new folder; nothing else should write it")  # noqa: F841 (held to the end)
+    runs.save_run_configs(run_dir, env_cfg, train_cfg)
     runner.attach_run_dir(run_dir, progress_prefix="[time_to_obedience] ")
     steps_per_iteration = env_cfg.env.num_envs * train_cfg.num_steps_per_env
     print(f"profile {args.profile}: {env_cfg.env.num_envs} envs x {train_cfg.num_steps_per_env} steps, "

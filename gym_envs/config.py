@@ -191,13 +191,15 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def from_dict(cls: type, data: Mapping, path: str = "") -> Any:
+def from_dict(cls: type, data: Mapping, path: str = "", complete: bool = False) -> Any:
     """Build ``cls`` from a nested dict: strict keys, defaults for missing keys, type-checked values.
 
     A partial nested section is merged onto that field's *default instance*, so a derived task whose
     ``default_factory`` changes section defaults keeps them for keys the dict does not mention.
+    With ``complete`` (a config the program saved, not one a person writes) a missing key, or a missing
+    entry of a dict the defaults fill, is an error naming it: the file was cut short or edited.
     """
-    return _build(cls, data, path, base=None)
+    return _build(cls, data, path, base=None, complete=complete)
 
 
 def _field_default(f: dataclasses.Field) -> Any:
@@ -206,7 +208,12 @@ def _field_default(f: dataclasses.Field) -> Any:
     return f.default
 
 
-def _build(cls: type, data: Mapping, path: str, base: Any) -> Any:
+def _missing_key(key: str) -> ConfigError:
+    return ConfigError(f"config key '{key}' is missing; a saved run config has every key (the file was cut short "
+                       f"or edited): restore it from a copy")
+
+
+def _build(cls: type, data: Mapping, path: str, base: Any, complete: bool = False) -> Any:
     if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
         raise TypeError(f"from_dict expects a dataclass type, got {cls!r}")
     if not isinstance(data, Mapping):
@@ -224,6 +231,8 @@ def _build(cls: type, data: Mapping, path: str, base: Any) -> Any:
     for f in fields:
         key = _join(path, f.name)
         if f.name not in data:
+            if complete:
+                raise _missing_key(key)
             if base is not None:
                 kwargs[f.name] = copy.deepcopy(getattr(base, f.name))
             elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
@@ -231,14 +240,25 @@ def _build(cls: type, data: Mapping, path: str, base: Any) -> Any:
             continue
         value = data[f.name]
         default = getattr(base, f.name) if base is not None else _field_default(f)
-        if isinstance(value, Mapping) and dataclasses.is_dataclass(default) and not isinstance(default, type):
-            kwargs[f.name] = _build(type(default), value, key, base=default)
+        is_section = dataclasses.is_dataclass(default) and not isinstance(default, type)
+        if complete and value is None and type(None) not in typing.get_args(hints[f.name]):
+            # A file cut right after 'key:' leaves None, which save_yaml never writes there: for a section or a
+            # dict, name the first key it lacks.
+            entries = [x.name for x in _init_fields(type(default))] if is_section else \
+                list(default) if isinstance(default, Mapping) else []
+            raise _missing_key(_join(key, entries[0]) if entries else key)
+        if isinstance(value, Mapping) and is_section:
+            kwargs[f.name] = _build(type(default), value, key, base=default, complete=complete)
         else:
-            kwargs[f.name] = _coerce(hints[f.name], value, key)
+            if complete and isinstance(value, Mapping) and isinstance(default, Mapping):
+                for entry in default:
+                    if entry not in value:
+                        raise _missing_key(_join(key, entry))
+            kwargs[f.name] = _coerce(hints[f.name], value, key, complete)
     return cls(**kwargs)
 
 
-def _coerce(tp: Any, value: Any, key: str) -> Any:
+def _coerce(tp: Any, value: Any, key: str, complete: bool = False) -> Any:
     """Check ``value`` against annotation ``tp`` and return it converted (int->float, list->tuple, dict->dataclass)."""
     if tp is Any:
         return value
@@ -249,7 +269,7 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
             return None
         options = [a for a in args if a is not type(None)]
         if len(options) == 1 and (typing.get_origin(options[0]) or dataclasses.is_dataclass(options[0])):
-            return _coerce(options[0], value, key)  # Optional[container]: let it report nested errors itself
+            return _coerce(options[0], value, key, complete)  # Optional[container]: let it report nested errors itself
         for option in options:
             try:
                 return _coerce(option, value, key)
@@ -267,7 +287,7 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
         if isinstance(value, tp):
             return value
         if isinstance(value, Mapping):
-            return from_dict(tp, value, key)
+            return from_dict(tp, value, key, complete)
         raise _type_error(tp, value, key)
 
     if tp is bool:
@@ -433,8 +453,11 @@ def save_yaml(cfg: Any, path: str | os.PathLike) -> None:
         f.write(text)
 
 
-def load_yaml(cls: type, path: str | os.PathLike) -> Any:
-    """Load a YAML file written by ``save_yaml`` (or by hand) into ``cls``; errors name the file."""
+def load_yaml(cls: type, path: str | os.PathLike, complete: bool = False) -> Any:
+    """Load a YAML file written by ``save_yaml`` (or by hand) into ``cls``; errors name the file.
+
+    ``complete``: the file was written by ``save_yaml`` and must hold every key (see ``from_dict``).
+    """
     path = os.fspath(path)
     with open(path, encoding="utf-8") as f:
         try:
@@ -442,7 +465,7 @@ def load_yaml(cls: type, path: str | os.PathLike) -> Any:
         except yaml.YAMLError as err:
             raise ConfigError(f"{path}: invalid YAML ({_yaml_error_line(err)}); fix the syntax") from None
     try:
-        return from_dict(cls, {} if data is None else data)
+        return from_dict(cls, {} if data is None else data, complete=complete)
     except ConfigError as err:
         raise ConfigError(f"{path}: {err}") from None
 

@@ -97,6 +97,19 @@ def folder(text: str) -> str:
     return text
 
 
+def check_writable(path: str, flag: str = "--out") -> None:
+    """Make folder `path` and write a file into it, or a one-line ConfigError: before hours of work, not after."""
+    import tempfile
+
+    try:
+        os.makedirs(path, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as err:
+        raise ConfigError(f"{flag} {path} cannot be written ({err.strerror or err}); choose a folder you can "
+                          f"write into") from None
+
+
 def new_file(suffix: str) -> Callable[[str], str]:
     """A file to write: `suffix` as its extension, in a folder that exists."""
     def parse(text: str) -> str:

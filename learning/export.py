@@ -205,7 +205,16 @@ def read_metadata(path: str) -> dict:
 
 
 def export_deployment(runner, task, directory: str, checkpoint: str = "") -> list[str]:
-    """Write policy.pt, policy.onnx and (oscillator tasks) controller.onnx; returns the paths written."""
+    """Write policy.pt, policy.onnx and (oscillator tasks) controller.onnx; returns the paths written.
+
+    A policy with a NaN or infinite tensor is refused before anything is written: a robot would run it.
+    """
+    from learning.runs import non_finite_tensor
+
+    bad = non_finite_tensor(runner.alg.get_policy().state_dict())
+    if bad:
+        raise ConfigError(f"not exporting {checkpoint or 'the policy'}: tensor {bad[0]} holds {bad[1]} NaN or infinite "
+                          f"values; export a checkpoint whose networks are finite")
     os.makedirs(directory, exist_ok=True)
     metadata = deployment_metadata(task, checkpoint)
     jit_path, onnx_path = os.path.join(directory, POLICY_JIT), os.path.join(directory, POLICY_ONNX)

@@ -10,27 +10,33 @@ Layout (one folder per training run; a resumed run gets a new folder):
         git/             state of the repository the run was started from
         exported/        policy.pt (TorchScript) and policy.onnx, written by play.py --export
 
+        format.yaml      the run-folder format that wrote it (RUN_FORMAT; absent in older runs)
+        .lock            flock-ed by the process writing the folder (see FolderLock)
+
 Checkpoints are written atomically (temporary file in the same folder, then os.replace) and read
-with `torch.load(weights_only=True)`: they hold only tensors, dicts, lists, numbers and strings.
-The hidden temporary file a killed save leaves behind is removed by the next save into that
-folder, and by train.py when it resumes from the folder.
+with `torch.load(weights_only=True)`: they hold only tensors, dicts, lists, numbers and strings,
+and every tensor must be finite. The hidden temporary file a killed save leaves behind is removed
+by the next save into that folder, and by train.py when it resumes from the folder, but only when
+no process holds the folder's lock: a live run is never touched.
 Every failure here is a `RunError` whose message is one line saying what exists.
 """
 
 from __future__ import annotations
 
 import datetime
+import fcntl
 import glob
 import os
 import pickle
 import re
+import sys
 from dataclasses import dataclass
 from typing import Any
 
 import torch
 import yaml
 
-from gym_envs.config import ConfigError
+from gym_envs.config import ConfigError, load_yaml
 from gym_envs.files import atomic_write
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -38,6 +44,12 @@ DEFAULT_LOG_ROOT = os.path.join(REPO_ROOT, "logs")
 POLICY_ROOT = os.path.join(REPO_ROOT, "resources", "policies")
 ENV_YAML, TRAIN_YAML = "env.yaml", "train.yaml"
 EXPORT_DIR = "exported"
+FORMAT_YAML = "format.yaml"
+LOCK_FILE = ".lock"
+# The run-folder format this code writes. Format 1: env.yaml and train.yaml hold every config key, so a
+# missing key is an error. Folders without format.yaml (format 0, written before) take the defaults for
+# keys they lack. Adding a config key makes older folders lack it: bump this then, so they stay loadable.
+RUN_FORMAT = 1
 
 _CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 _GIT_SECTION_RE = re.compile(r"--- git (\w+) ---\n(.*?)(?=\n--- git |\Z)", re.S)
@@ -50,7 +62,68 @@ class RunError(ConfigError):
 
 
 def default_log_root() -> str:
-    return os.environ.get("ORCGYM_LOG_ROOT", DEFAULT_LOG_ROOT)
+    return os.environ.get("ORCGYM_LOG_ROOT") or DEFAULT_LOG_ROOT  # set but empty counts as unset
+
+
+# --- who writes a folder ------------------------------------------------------------------------
+
+
+class FolderLock:
+    """This process writes `folder`: an exclusive flock on <folder>/.lock, holding the pid and program.
+
+    The kernel drops the lock when the process ends, however it ends, so a killed run leaves no stale
+    lock. A second writer (a resume cleaning up, a second sweep into the same folder) gets a RunError
+    naming the holder's pid; `fix` says what to do instead.
+    """
+
+    def __init__(self, folder: str, fix: str):
+        path = os.path.join(folder, LOCK_FILE)
+        self.fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _lock_holder(self.fd)
+            os.close(self.fd)
+            raise RunError(f"{folder} is being written by {holder}; {fix}") from None
+        os.ftruncate(self.fd, 0)
+        os.write(self.fd, f"{os.getpid()} {os.path.basename(sys.argv[0]) if sys.argv else 'python'}\n".encode())
+
+    def release(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)  # closing the only descriptor drops the flock
+            self.fd = None
+
+    def __enter__(self) -> FolderLock:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def _lock_holder(fd: int) -> str:
+    """'process <pid> (<program>)' from a lock file's contents."""
+    text = os.pread(fd, 200, 0).decode(errors="replace").split()
+    if not text:
+        return "another process"
+    return f"process {text[0]}" + (f" ({text[1]})" if len(text) > 1 else "")
+
+
+def check_not_in_use(folder: str, fix: str) -> None:
+    """RunError naming the holder's pid if a process writes `folder` now; creates nothing.
+
+    A shared flock, released at once: it conflicts only with a writer's exclusive one, so processes
+    that all merely check (the ranks of one torchrun) do not see each other.
+    """
+    try:
+        fd = os.open(os.path.join(folder, LOCK_FILE), os.O_RDONLY)
+    except FileNotFoundError:
+        return  # never locked: nobody writes it
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise RunError(f"{folder} is being written by {_lock_holder(fd)}; {fix}") from None
+    finally:
+        os.close(fd)
 
 
 # --- creating runs ----------------------------------------------------------------------------
@@ -113,12 +186,21 @@ def checkpoint_iteration(path: str) -> int:
 def remove_stale_temps(run_dir: str) -> list[str]:
     """Delete the hidden `.model_<it>.pt.*.tmp` files that saves killed mid-write leave; returns their paths.
 
-    Only one process writes a run folder, so a temporary file present before it saves is stale.
+    Call it as the folder's writer (holding its FolderLock, or as the only process that writes it): a
+    temporary file present before that process saves is then stale.
     """
     stale = glob.glob(os.path.join(glob.escape(run_dir), ".model_*.pt.*.tmp"))
     for path in stale:
         os.remove(path)
     return stale
+
+
+def remove_stale_temps_of_idle_run(run_dir: str, fix: str) -> list[str]:
+    """remove_stale_temps of a folder this process does not write, if no process writes it (else RunError)."""
+    if not glob.glob(os.path.join(glob.escape(run_dir), ".model_*.pt.*.tmp")):
+        return []  # nothing to remove: leave the folder exactly as it is (no lock file either)
+    with FolderLock(run_dir, fix):
+        return remove_stale_temps(run_dir)
 
 
 def save_checkpoint(data: dict, path: str) -> None:
@@ -148,7 +230,27 @@ def load_checkpoint(path: str, map_location: str | torch.device | None = None) -
                        f"({type(err).__name__}: {' '.join(str(err).split())})") from None
     if not isinstance(data, dict) or "actor_state_dict" not in data:
         raise RunError(f"{path} is not an orcgym/rsl-rl checkpoint (no actor_state_dict)")
+    bad = non_finite_tensor(data)
+    if bad:
+        folder = os.path.dirname(os.path.abspath(path))
+        others = [it for it in list_checkpoints(folder) if checkpoint_path(folder, it) != os.path.abspath(path)]
+        raise RunError(f"refused checkpoint {path}: tensor {bad[0]} holds {bad[1]} NaN or infinite values (training "
+                       f"diverged before this save); remove it, or pick an earlier one with play.py/train.py "
+                       f"--checkpoint N" + (f" (its run also has {', '.join(map(str, others))})" if others else ""))
     return data
+
+
+def non_finite_tensor(data: Any, name: str = "") -> tuple[str, int] | None:
+    """(dotted name, count) of the first floating-point tensor in nested dicts/lists with a NaN or infinity."""
+    if isinstance(data, torch.Tensor):
+        count = int((~torch.isfinite(data)).sum()) if data.is_floating_point() else 0
+        return (name, count) if count else None
+    items = data.items() if isinstance(data, dict) else enumerate(data) if isinstance(data, (list, tuple)) else ()
+    for key, value in items:
+        found = non_finite_tensor(value, f"{name}.{key}" if name else str(key))
+        if found:
+            return found
+    return None
 
 
 def model_io_dims(state_dict: dict) -> tuple[int, int]:
@@ -275,6 +377,28 @@ def list_runs(log_root: str, experiment: str | None = None) -> list[RunInfo]:
     return sorted(runs, key=RunInfo.sort_key)
 
 
+def scan_runs(root: str, depth: int = 2) -> tuple[list[str], list[tuple[str, str]]]:
+    """Run folders at root or at most `depth` levels below it, sorted by path, and the folders there that
+    hold part of a run (env.yaml, train.yaml or a checkpoint) but not all of it, each with what it lacks."""
+    names = set(os.listdir(root))
+    parts = {ENV_YAML: ENV_YAML in names, TRAIN_YAML: TRAIN_YAML in names,
+             "a checkpoint model_<it>.pt": any(_CHECKPOINT_RE.match(n) for n in names)}
+    if any(parts.values()):
+        missing = [part for part, present in parts.items() if not present]
+        return ([], [(os.path.abspath(root), "no " + " and no ".join(missing))]) if missing else \
+            ([os.path.abspath(root)], [])
+    found: list[str] = []
+    skipped: list[tuple[str, str]] = []
+    if depth > 0:
+        for name in sorted(names):
+            sub = os.path.join(root, name)
+            if os.path.isdir(sub):
+                more, less = scan_runs(sub, depth - 1)
+                found += more
+                skipped += less
+    return found, skipped
+
+
 def _describe(runs: list[RunInfo], limit: int = 8) -> str:
     if not runs:
         return "none"
@@ -383,17 +507,67 @@ def run_task(run_dir: str) -> str | None:
     return RunInfo(run_dir, os.path.basename(os.path.dirname(run_dir)), os.path.basename(run_dir)).task
 
 
+def save_run_configs(run_dir: str, env_cfg: Any, train_cfg: Any) -> None:
+    """env.yaml and train.yaml (every key) and format.yaml of a run folder this process writes."""
+    from gym_envs.config import save_yaml
+
+    save_yaml(env_cfg, os.path.join(run_dir, ENV_YAML))
+    save_yaml(train_cfg, os.path.join(run_dir, TRAIN_YAML))
+    with atomic_write(os.path.join(run_dir, FORMAT_YAML)) as f:
+        f.write(f"run_format: {RUN_FORMAT}\n")
+
+
+def run_format(run_dir: str) -> int:
+    """The format a run folder was written in (0: before format.yaml existed)."""
+    path = os.path.join(run_dir, FORMAT_YAML)
+    if not os.path.isfile(path):
+        return 0
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = yaml.safe_load(f)
+    except (OSError, yaml.YAMLError):
+        data = None
+    value = data.get("run_format") if isinstance(data, dict) else None
+    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+        raise RunError(f"{path} cannot be read; it holds one line 'run_format: {RUN_FORMAT}' (restore it, or remove "
+                       f"it if the run was written before run formats existed)")
+    if value > RUN_FORMAT:
+        raise RunError(f"{run_dir} was written by a newer orcgym (run format {value}; this one reads formats up to "
+                       f"{RUN_FORMAT}); update orcgym to use it")
+    return value
+
+
+def load_run_yaml(run_dir: str, cls: type, name: str) -> Any:
+    """env.yaml or train.yaml of a run folder as `cls`. A folder of this code's format must hold every key
+    (a missing one is an error naming it); an older one takes the defaults for keys added since."""
+    return load_yaml(cls, run_file(run_dir, name), complete=run_format(run_dir) == RUN_FORMAT)
+
+
+def run_file(run_dir: str, name: str) -> str:
+    """The path of env.yaml or train.yaml of a run folder; RunError if it is missing."""
+    path = os.path.join(run_dir, name)
+    if not os.path.isfile(path):
+        raise RunError(f"{run_dir} has no {name}; a run folder needs {ENV_YAML}, {TRAIN_YAML} and a checkpoint")
+    return path
+
+
 def load_run_configs(run_dir: str) -> tuple[str, Any, Any]:
-    """(task, env config, train config) of a run folder, rebuilt from its YAMLs."""
-    from gym_envs.config import load_yaml
+    """(task, env config, train config) of a run folder, rebuilt from its YAMLs; values outside the rules are
+    errors naming the file (they were saved checked, so the file was edited)."""
     from gym_envs.registry import env_cfg_class
     from learning.runner_config import train_cfg_class
 
+    train_path = run_file(run_dir, TRAIN_YAML)
     task = run_task(run_dir)
     if not task:
-        raise RunError(f"{os.path.join(run_dir, TRAIN_YAML)} names no task")
-    env_cfg = load_yaml(env_cfg_class(task), os.path.join(run_dir, ENV_YAML))
-    train_cfg = load_yaml(train_cfg_class(task), os.path.join(run_dir, TRAIN_YAML))
+        raise RunError(f"{train_path} names no task")
+    env_cfg = load_run_yaml(run_dir, env_cfg_class(task), ENV_YAML)
+    train_cfg = load_run_yaml(run_dir, train_cfg_class(task), TRAIN_YAML)
+    for name, check in ((ENV_YAML, env_cfg.validate), (TRAIN_YAML, lambda: train_cfg.validate(env_cfg.env.num_envs))):
+        try:
+            check()
+        except ConfigError as err:
+            raise ConfigError(f"{os.path.join(run_dir, name)}: {err}") from None
     return task, env_cfg, train_cfg
 
 

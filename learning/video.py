@@ -25,8 +25,8 @@ def has_display() -> bool:
 
 def prefer_offscreen_gl() -> None:
     """Without a display, render through EGL unless MUJOCO_GL says otherwise; call before importing mujoco."""
-    if not has_display():
-        os.environ.setdefault("MUJOCO_GL", "egl")
+    if not has_display() and not os.environ.get("MUJOCO_GL"):  # set but empty counts as unset
+        os.environ["MUJOCO_GL"] = "egl"
 
 
 class VideoRecorder:

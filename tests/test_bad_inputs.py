@@ -14,7 +14,7 @@ import pytest
 import play
 import sweep
 import train
-from analysis import balanced_legs, disturbance, fixed_points, gait_emergence, pace_to_trot, report
+from analysis import balanced_legs, disturbance, fixed_points, gait_emergence, obedience, pace_to_trot, report
 from analysis.rollout import build_parser
 from gym_envs.config import Check, OneOf, Ordered, Range, to_dict, yaml_text
 from gym_envs.legged_robot import LeggedRobot
@@ -23,7 +23,7 @@ from learning.runner_config import MiniCheetahOscTrainCfg, TrainCfg
 
 ANALYSIS = {"analysis.report": report, "analysis.balanced_legs": balanced_legs,
             "analysis.disturbance": disturbance, "analysis.gait_emergence": gait_emergence,
-            "analysis.pace_to_trot": pace_to_trot}
+            "analysis.pace_to_trot": pace_to_trot, "analysis.obedience": obedience}
 # Provenance keys: any string is a valid value, and setting them changes nothing.
 NO_BAD_VALUE = {"train.profile", "train.resumed_from"}
 
