@@ -50,6 +50,9 @@ LOCK_FILE = ".lock"
 # missing key is an error. Folders without format.yaml (format 0, written before) take the defaults for
 # keys they lack. Adding a config key makes older folders lack it: bump this then, so they stay loadable.
 RUN_FORMAT = 1
+# What format-0 runs trained with where a key added since defaults to something else: the yaw-rate term
+# became the paper's squared exponential together with the key that names it (issue 26).
+FORMAT_0_VALUES = {ENV_YAML: {"rewards.yaw_tracking": "released_quartic"}}
 
 _CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 _GIT_SECTION_RE = re.compile(r"--- git (\w+) ---\n(.*?)(?=\n--- git |\Z)", re.S)
@@ -539,8 +542,26 @@ def run_format(run_dir: str) -> int:
 
 def load_run_yaml(run_dir: str, cls: type, name: str) -> Any:
     """env.yaml or train.yaml of a run folder as `cls`. A folder of this code's format must hold every key
-    (a missing one is an error naming it); an older one takes the defaults for keys added since."""
-    return load_yaml(cls, run_file(run_dir, name), complete=run_format(run_dir) == RUN_FORMAT)
+    (a missing one is an error naming it); an older one takes the defaults for keys added since, or what
+    it trained with where that differs (FORMAT_0_VALUES)."""
+    from gym_envs.config import apply_overrides
+
+    path, version = run_file(run_dir, name), run_format(run_dir)
+    cfg = load_yaml(cls, path, complete=version == RUN_FORMAT)
+    if version == 0:
+        with open(path, encoding="utf-8") as f:
+            saved = yaml.safe_load(f) or {}
+        cfg = apply_overrides(cfg, [f"{key}={value}" for key, value in FORMAT_0_VALUES.get(name, {}).items()
+                                    if not _holds_key(saved, key)])
+    return cfg
+
+
+def _holds_key(data: dict, dotted: str) -> bool:
+    for part in dotted.split("."):
+        if not isinstance(data, dict) or part not in data:
+            return False
+        data = data[part]
+    return True
 
 
 def run_file(run_dir: str, name: str) -> str:

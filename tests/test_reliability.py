@@ -218,6 +218,19 @@ def test_a_cut_env_yaml_is_refused_by_play_and_resume_and_older_runs_still_load(
         runs.load_run_configs(run_copy)
 
 
+def test_older_runs_keep_the_yaw_term_they_trained_with():
+    # The shipped policies predate rewards.yaw_tracking and trained with the released quartic; a run that
+    # names its term keeps it.
+    _, shipped, _ = runs.load_run_configs(os.path.join(runs.POLICY_ROOT, "ORC_111"))
+    assert runs.run_format(os.path.join(runs.POLICY_ROOT, "ORC_111")) == 0
+    assert shipped.rewards.yaw_tracking == "released_quartic" and shipped.osc.standing_rule == "lin_vel_x"
+
+
+def test_a_format_0_run_that_names_its_yaw_term_keeps_it(run_copy):
+    os.remove(os.path.join(run_copy, runs.FORMAT_YAML))
+    assert runs.load_run_configs(run_copy)[1].rewards.yaw_tracking == "sqexp"
+
+
 # --- 5: every analysis command line ----------------------------------------------------------------------
 
 
