@@ -90,11 +90,13 @@ def command_result(rollout, name: str, command) -> CommandResult:
     )
 
 
-def measure(policies, commands: dict[str, tuple[float, float, float]] = ENVELOPE, robots: int = QUICK["robots"],
+def measure(policies, commands: dict[str, tuple[float, float, float]] | None = None, robots: int = QUICK["robots"],
             warmup_s: float = QUICK["warmup_s"], measure_s: float = QUICK["measure_s"],
             settings: EvalSettings = EvalSettings(), seed: int = 0, num_threads: int = 0,
             progress: bool = True) -> list[CommandResult]:
-    """Every policy at every command, all in shared batches; results per policy, in the commands' order."""
+    """Every policy at every command (default ENVELOPE), all in shared batches; results per policy, in the
+    commands' order."""
+    commands = ENVELOPE if commands is None else commands
     if measure_s < gait.CHECKPOINT_INTERVAL:
         raise ValueError(f"measure_s={measure_s:g} is shorter than one {gait.CHECKPOINT_INTERVAL:g} s gait checkpoint")
     dt = 1.0 / policies[0].env_cfg.control.frequency_hz

@@ -240,8 +240,8 @@ def analysis_clis() -> list[str]:
 
 
 def test_every_analysis_module_with_a_main_is_covered():
-    assert set(analysis_clis()) == {"balanced_legs", "disturbance", "fixed_points", "gait_emergence", "obedience",
-                                    "pace_to_trot", "report"}
+    assert set(analysis_clis()) == {"balanced_legs", "disturbance", "envelope", "fixed_points", "gait_emergence",
+                                    "obedience", "pace_to_trot", "report"}
 
 
 def run_as_main(module: str, argv: list[str]) -> int:
@@ -274,13 +274,15 @@ def test_python_m_analysis_help_works_and_errors_exit_non_zero(module, tmp_path,
 @pytest.fixture
 def smallest_sizes(monkeypatch):
     """Every analysis's --quick sizes cut to the least its metrics need: seconds, not minutes."""
-    from analysis import balanced_legs, disturbance, gait_emergence, obedience, pace_to_trot
+    from analysis import balanced_legs, disturbance, envelope, gait_emergence, obedience, pace_to_trot
 
     monkeypatch.setattr(balanced_legs, "QUICK", {"robots_per_policy": 2, "duration_s": 1.0})
     monkeypatch.setattr(gait_emergence, "QUICK", {"runs": 2, "duration_s": 5.0})
     monkeypatch.setattr(pace_to_trot, "QUICK", {"runs": 2, "duration_s": 5.0})
     monkeypatch.setattr(obedience, "QUICK", {"robots": 2, "duration_s": 5.0, "settle_robots": 2,
                                              "settle_duration_s": 5.0})
+    monkeypatch.setattr(envelope, "QUICK", {"robots": 1, "warmup_s": 0.1, "measure_s": 5.0})
+    monkeypatch.setattr(envelope, "ENVELOPE", {name: envelope.ENVELOPE[name] for name in ("stand", "forward 1")})
     monkeypatch.setattr(disturbance, "QUICK_MAGNITUDES", (2.0,))
     monkeypatch.setattr(disturbance, "QUICK_BALL", dataclasses.replace(
         disturbance.QUICK_BALL, slots=1, directions=2, settle_s=0.2, test_s=0.6, push_at_s=0.1))
