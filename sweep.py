@@ -8,7 +8,7 @@ tensorboard events), so calling the same command again skips finished runs and r
 interrupted one in place from its newest checkpoint (its configs must match the command's).
 <out>/manifest.csv lists configuration, seed, iterations, wall time, final reward and final
 tracking error (mean |command - velocity| of the last episodes) of every run; it is rewritten
-after each run. Ctrl-C stops the current run with a checkpoint and ends the sweep (exit 130).
+after each run. Ctrl-C or SIGTERM stops the current run with a checkpoint and ends the sweep (exit 130 or 143).
 Every run's flags and config values are checked before the first folder is made. A sweep holds a
 lock on <out> (and on the run it trains) until it ends: a second sweep into the same <out>, or a
 train.py --resume of the run being trained, is refused with the sweep's pid.
@@ -73,8 +73,8 @@ def run_dir_of(out: str, orc: str, seed: int) -> str:
     return os.path.join(out, f"ORC_{orc}", f"seed{seed}")
 
 
-def train_one(args, orc: str, seed: int) -> str:
-    """Train, resume or skip one run; returns 'finished', 'skipped' or 'stopped'."""
+def train_one(args, orc: str, seed: int, stop: StopRequest) -> str:
+    """Train, resume or skip one run; returns 'finished', 'skipped' or 'stopped' (by `stop`)."""
     run_dir = run_dir_of(args.out, orc, seed)
     setup = train.prepare(train.build_parser().parse_args(train_args(args, orc, seed)))
     env_cfg, train_cfg, runner = setup.env_cfg, setup.train_cfg, setup.runner
@@ -96,8 +96,7 @@ def train_one(args, orc: str, seed: int) -> str:
             print(f"training {run_dir}", flush=True)
         runner.attach_run_dir(run_dir, progress_prefix=f"[ORC_{orc} seed{seed}] ")
         start = time.perf_counter()
-        with StopRequest() as stop:
-            finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
+        finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
         logger = runner.logger
         status = {
             "orc": orc,
@@ -176,14 +175,15 @@ def _main(args) -> int:
         for seed in args.seeds:
             train.resolve(train.build_parser().parse_args(train_args(args, orc, seed)))
     os.makedirs(args.out, exist_ok=True)
-    with runs.FolderLock(args.out, "wait for that sweep to end (or stop it), or choose another --out"):
+    with runs.FolderLock(args.out, "wait for that sweep to end (or stop it), or choose another --out"), \
+            StopRequest() as stop:
         for orc in args.orcs:
             for seed in args.seeds:
-                outcome = train_one(args, orc, seed)
+                outcome = "stopped" if stop.requested else train_one(args, orc, seed, stop)
                 print(f"ORC {orc} seed {seed}: {outcome}", flush=True)
                 write_manifest(args.out)
                 if outcome == "stopped":
-                    return train.EXIT_INTERRUPTED
+                    return stop.exit_status
         print(f"manifest: {write_manifest(args.out)}")
     return 0
 

@@ -35,8 +35,9 @@ train.yaml always records as a total) and says so when the run has already reach
 Seeds. --seed (default 0; -1 draws one) seeds python, numpy and torch, and becomes env.seed;
 train.yaml and env.yaml record the values used.
 
-Ctrl-C stops at the next env step and saves model_<completed iterations>.pt (exit status 130);
-a second Ctrl-C aborts without saving. Every flag and config value is checked before anything is
+Ctrl-C or SIGTERM (a cluster scheduler's stop) ends training at the next env step and saves
+model_<completed iterations>.pt (exit status 130 or 143; under torchrun every rank stops at the
+same iteration); a second one aborts without saving. Every flag and config value is checked before anything is
 built or written; a bad one is one line on stderr naming it and what is allowed (exit status 1;
 2 for a malformed flag). --debug shows the traceback of any error.
 
@@ -87,7 +88,6 @@ from typing import Any  # noqa: E402
 from gym_envs.config import ConfigError  # noqa: E402
 from learning import cli  # noqa: E402
 
-EXIT_INTERRUPTED = cli.EXIT_INTERRUPTED
 RESUME_LIVE_FIX = "resume it when that process has ended (or stop it first), or choose another run with --load_run"
 
 
@@ -346,7 +346,7 @@ def _main(args: argparse.Namespace) -> int:
         if setup.rank == 0:
             saved = runs.checkpoint_path(runner.log_dir, runner.current_learning_iteration)
             print(f"stopped at iteration {runner.current_learning_iteration}; saved {saved}", flush=True)
-        return EXIT_INTERRUPTED
+        return stop.exit_status
     finally:
         if lock is not None:
             lock.release()

@@ -44,34 +44,47 @@ def quiet():
 
 
 class StopRequest:
-    """Turns SIGINT into a request that training honours at the next env step (a second Ctrl-C aborts).
+    """Turns SIGINT (Ctrl-C) and SIGTERM (what SLURM and Kubernetes send before SIGKILL) into a request
+    that training honours at the next env step; a second signal aborts without saving.
 
-    Under torchrun the launcher passes a Ctrl-C on to every rank; only the one with `announce` says so.
+    Under torchrun the launcher passes either signal on to every rank; only the one with `announce`
+    says so, and the ranks agree on the iteration they stop at (TaskRunner._stop_everywhere).
     """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self, announce: bool = True) -> None:
         self.requested = False
         self.announce = announce
-        self._previous = None
+        self.signum = signal.SIGINT
+        self._previous: dict = {}
+
+    @property
+    def exit_status(self) -> int:
+        """128 + the signal's number, as a shell reports a process that signal ended: 130 or 143."""
+        return 128 + int(self.signum)
 
     def _handle(self, signum, frame) -> None:
         if self.requested:
             raise KeyboardInterrupt
-        self.requested = True
+        self.requested, self.signum = True, signum
         if self.announce:
-            print("\nstopping after this step; saving a checkpoint (Ctrl-C again to abort without saving)",
+            name = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+            print(f"\n{name}: stopping after this step; saving a checkpoint (again to abort without saving)",
                   flush=True)
 
     def __enter__(self) -> StopRequest:
-        try:
-            self._previous = signal.signal(signal.SIGINT, self._handle)
-        except ValueError:  # not the main thread: no handler, KeyboardInterrupt stays as it is
-            self._previous = None
+        for signum in self.SIGNALS:
+            try:
+                self._previous[signum] = signal.signal(signum, self._handle)
+            except ValueError:  # not the main thread: no handler, the signal keeps its default
+                pass
         return self
 
     def __exit__(self, *exc) -> None:
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+        for signum, previous in self._previous.items():
+            signal.signal(signum, previous)
+        self._previous = {}
 
 
 class ProgressLogger(Logger):

@@ -209,21 +209,23 @@ def test_play_falls_back_to_the_shipped_policy(tmp_path, capsys):
     assert os.path.join("resources", "policies", "ORC_010") in capsys.readouterr().out
 
 
-def test_ctrl_c_saves_a_checkpoint_and_exits_130(tmp_path):
+@pytest.mark.parametrize("signum, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_ctrl_c_or_sigterm_saves_a_checkpoint_and_exits_128_plus_the_signal(tmp_path, signum, status):
+    """SIGTERM is what SLURM and Kubernetes send before SIGKILL: it must save like Ctrl-C."""
     cmd = [sys.executable, "-u", "train.py", "--task", "mini_cheetah_osc", "--log_root", str(tmp_path),
            "--max_iterations", "1000", "--num_envs", "16", "--num_threads", "1", "--set", "train.num_steps_per_env=4"]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines = []
     for line in proc.stdout:
         lines.append(line)
-        if re.search(r"\bit +2/1000", line):
-            proc.send_signal(signal.SIGINT)
+        if re.search(r"\bit +3/1000", line):
+            proc.send_signal(signum)
             break
     out = "".join(lines) + proc.communicate(timeout=60)[0]
-    assert proc.returncode == 130, out
+    assert proc.returncode == status, out
     run = only_run(tmp_path)
     last = runs.list_checkpoints(run)[-1]
-    assert last >= 2 and f"stopped at iteration {last}" in out
+    assert last >= 3 and f"stopped at iteration {last}" in out  # the last completed iteration, not save_interval's
     assert torch.load(runs.checkpoint_path(run, last), weights_only=True)["iter"] == last
     assert not [f for f in os.listdir(run) if f.endswith(".tmp")]
 

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import csv
 import os
+import re
+import signal
+import subprocess
 import sys
 
 import pytest
@@ -81,3 +84,25 @@ def test_bad_orc_is_one_line(tmp_path, capsys, orc):
     assert sweep.main(["--out", str(tmp_path), "--orcs", orc]) == 2
     assert "is not an ORC string" in capsys.readouterr().err
     assert not os.listdir(tmp_path)
+
+
+def test_sigterm_stops_the_sweep_with_a_checkpoint_and_the_next_sweep_resumes_it(tmp_path):
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    cmd = [sys.executable, "-u", "sweep.py", "--out", str(tmp_path), "--orcs", "111", "010", "--seeds", "3",
+           "--max_iterations", "1000", *TINY]
+    proc = subprocess.Popen(cmd, cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if re.search(r"\bit +3/1000", line):
+            proc.send_signal(signal.SIGTERM)
+            break
+    out = "".join(lines) + proc.communicate(timeout=60)[0]
+    assert proc.returncode == 143, out
+    run_dir = str(tmp_path / "ORC_111" / "seed3")
+    last = runs.list_checkpoints(run_dir)[-1]
+    assert last >= 3 and "ORC 111 seed 3: stopped" in out and not (tmp_path / "ORC_010").exists()
+    assert manifest(tmp_path)[("111", "3")]["iterations"] == str(last)
+    assert sweep.main(["--out", str(tmp_path), "--orcs", "111", "--seeds", "3", "--max_iterations", str(last + 1),
+                       *TINY]) == 0
+    assert runs.list_checkpoints(run_dir)[-1] == last + 1
