@@ -43,8 +43,7 @@ built or written; a bad one is one line on stderr naming it and what is allowed 
 
 Defaults that fit the machine (learning/machine.py). Without --device the run uses CUDA when torch
 sees a device, else the CPU; without --profile it trains the paper's settings on CUDA and a CPU recipe
-on the CPU (1024 robots x 24 steps: cpu_oscillators, 350 iterations, for mini_cheetah_osc, under which
-ORC-111 follows its oscillators; cpu_fast, 300 iterations, for other tasks); without --sim it simulates with
+on the CPU ({cpu_recipes}; under cpu_oscillators ORC-111 follows its oscillators); without --sim it simulates with
 MuJoCo Warp on CUDA when the gpu extra is installed. The first lines of a run say what was chosen,
 why, the expected duration (for the CPU, from the rate measured on a 2-core machine) and the flag
 that picks the other settings. A resumed run keeps its own profile and physics.
@@ -86,13 +85,13 @@ from dataclasses import dataclass  # noqa: E402
 from typing import Any  # noqa: E402
 
 from gym_envs.config import ConfigError  # noqa: E402
-from learning import cli  # noqa: E402
+from learning import cli, machine  # noqa: E402
 
 RESUME_LIVE_FIX = "resume it when that process has ended (or stop it first), or choose another run with --load_run"
 
 
 def build_parser() -> cli.Parser:
-    p = cli.Parser("train.py", __doc__)
+    p = cli.Parser("train.py", __doc__.replace("{cpu_recipes}", machine.cpu_recipes_text()))
     p.add_argument("--task", help="task name (mini_cheetah_osc, mini_cheetah); with --resume, defaults to the run's")
     p.add_argument("--orc", type=cli.orc, help="ORC string for oscillator tasks (sets osc.orc; experiment ORC_<orc>)")
     p.add_argument("--num_envs", type=cli.integer(1), help="robots (per process under torchrun)")
@@ -101,7 +100,7 @@ def build_parser() -> cli.Parser:
                         "checkpoint's (default: train.max_iterations; --resume: on to the run's planned total)")
     p.add_argument("--seed", type=cli.integer(-1), help="seed of python/numpy/torch and env.seed (-1: draw one); "
                    "default 0")
-    p.add_argument("--headless", action="store_true", help="accepted for compatibility; training never renders")
+    p.add_argument("--headless", action="store_true", help="accepted as in legged_gym: training opens no window (--video renders offscreen)")
     p.add_argument("--resume", action="store_true", help="continue from a checkpoint (newest run unless --load_run)")
     cli.add_run_selection(p, "resume")
     p.add_argument("--run_name", type=cli.name, help="suffix of the run folder name (default seed<seed>)")

@@ -30,6 +30,20 @@ def cpu_profile(task: str | None) -> str:
     return CPU_PROFILE_OF_TASK.get(task, CPU_PROFILE)
 
 
+def cpu_recipes_text() -> str:
+    """The CPU recipes as the help texts quote them, read from the profiles, e.g. '1024 robots x 24 steps:
+    cpu_oscillators, 600 iterations, for mini_cheetah_osc; cpu_fast, 300 iterations, for other tasks'."""
+    from learning.runner_config import profile_setting
+
+    def size(name: str) -> str:
+        return f"{profile_setting(name, 'env.num_envs')} robots x {profile_setting(name, 'train.num_steps_per_env')} steps"
+
+    parts = [f"{name}, {profile_setting(name, 'train.max_iterations')} iterations, for {task}"
+             for task, name in CPU_PROFILE_OF_TASK.items()]
+    parts.append(f"{CPU_PROFILE}, {profile_setting(CPU_PROFILE, 'train.max_iterations')} iterations, for other tasks")
+    return f"{size(CPU_PROFILE)}: " + "; ".join(parts)
+
+
 @dataclass(frozen=True)
 class RunDefaults:
     device: str  # 'cpu' or 'cuda'

@@ -238,7 +238,7 @@ PROFILES: dict[str, Profile] = {
         "lr 1e-3 adaptive, lambda 0.95, forward-walking commands",
         (
             "env.num_envs=1024",
-            "train.max_iterations=300",  # the shipped policies walk after 250-350 (about 7 min on 2 idle cores)
+            "train.max_iterations=300",
             "commands.lin_vel_x_choices=[0.0, 1.0, 2.0]",
             "commands.lin_vel_x_noise=0.3",
             "commands.lin_vel_y=[-0.3, 0.3]",
@@ -275,6 +275,13 @@ PROFILES["cpu_oscillators"] = Profile(
     ),
     tasks=("mini_cheetah_osc",),
 )
+
+
+def profile_setting(name: str, key: str) -> str | None:
+    """The value a profile gives `key` (its last override of it), as written; None when it leaves it."""
+    values = [item.partition("=")[2].strip() for item in PROFILES[name].overrides
+              if item.partition("=")[0].strip() == key]
+    return values[-1] if values else None
 
 
 def profile_overrides(name: str | None, task: str | None = None) -> list[str]:

@@ -84,3 +84,14 @@ def test_a_run_says_what_it_chose_why_and_how_long_it_takes(tmp_path, capsys, mo
     (run,) = os.listdir(tmp_path / experiment)
     saved = (tmp_path / experiment / run / "train.yaml").read_text()
     assert "profile: cpu_oscillators" in saved and "[128, 128, 64]" in saved  # the recipe's networks, the flags on top
+
+
+def test_train_help_quotes_the_cpu_recipes_from_their_profiles(monkeypatch, capsys):
+    import train
+    from learning import runner_config
+
+    iterations = runner_config.profile_setting("cpu_oscillators", "train.max_iterations")
+    assert f"cpu_oscillators, {iterations} iterations, for mini_cheetah_osc" in train.build_parser().description
+    changed = runner_config.Profile("x", runner_config.PROFILES["cpu_oscillators"].overrides + ("train.max_iterations=7",))
+    monkeypatch.setitem(runner_config.PROFILES, "cpu_oscillators", changed)
+    assert "cpu_oscillators, 7 iterations" in train.build_parser().description
