@@ -84,6 +84,7 @@ class LeggedRobot:
             termination_sensors=tuple(cfg.sim.termination_sensors),
             device=self.device,
             num_threads=cfg.sim.num_threads,
+            cuda_graphs=cfg.sim.cuda_graphs,
         )
         self._init_timing()
         self._init_buffers()
