@@ -495,7 +495,7 @@ class MujocoWarpBackend(MujocoModelBackend):
         return torch.as_tensor(as_index(env_ids), device=self._view_device)
 
     def _values(self, values) -> torch.Tensor:
-        return torch.as_tensor(values, dtype=torch.float32).to(self._view_device)
+        return torch.as_tensor(values, dtype=torch.float32, device=self._view_device)
 
 
 
