@@ -1,7 +1,7 @@
 """GPU check: the checks and figures a short window on a CUDA machine is for, in one command and one log.
 
     python tools/gpu_check.py --log gpu_check.log                   # on the GPU machine: cuda, 4096 and 8192 robots
-    python tools/gpu_check.py --train_minutes 5 --num_envs 4096     # shorter
+    python tools/gpu_check.py --train_minutes 2 --num_envs 4096     # shorter
 
 1. MuJoCo Warp on the device against the CPU backend (mujoco.batch): one control step from the
    same state, the rescue of a blown-up env, and the standing foot forces against the robot's weight.
@@ -12,8 +12,9 @@
 4. ORC-111 trained at the paper's settings (train.py --profile paper) for --train_minutes, then
    stopped as Ctrl-C stops it (a checkpoint is saved); its progress lines go into the log.
 
-Exit status 1 when a check failed (the measurements still run). On a machine without CUDA it runs
-the same steps on Warp's CPU device, which is what CI's smoke test does with tiny sizes.
+Exit status 1 when a check failed; a part that raises is logged with its traceback and the next
+part still runs. On a machine without CUDA it runs the same steps on Warp's CPU device, which is
+what CI's smoke test does with tiny sizes.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import subprocess
 import sys
 import threading
 import time
+import traceback
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)  # a bare GPU machine has the checkout, not an installed package
@@ -68,6 +70,14 @@ class Checks:
         print(f"{'PASS' if ok else 'FAIL'} {name}: {detail}", flush=True)
         if not ok:
             self.failed.append(name)
+
+    def run(self, name: str, fn, *args) -> None:
+        """One part of the check; an error is logged with its traceback and the next part still runs."""
+        try:
+            fn(*args)
+        except Exception as err:
+            print(traceback.format_exc(), end="", flush=True)
+            self.report(name, False, f"{type(err).__name__}: {err}")
 
 
 def backend(name: str, num_envs: int, device: str):
@@ -152,7 +162,7 @@ def main(argv=None) -> int:
     p.add_argument("--num_envs", type=int, nargs="+", default=[4096, 8192], help="robot counts for the throughput")
     p.add_argument("--steps", type=int, default=50, help="control steps per timed round")
     p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--train_minutes", type=float, default=6.0, help="0 skips the training run")
+    p.add_argument("--train_minutes", type=float, default=5.0, help="0 skips the training run")
     p.add_argument("--train_num_envs", type=int, default=None, help="robots of the training run (default: the paper's)")
     p.add_argument("--train_max_iterations", type=int, default=None,
                    help="stop sooner than the minutes if this many iterations are done (default: the paper's 2000)")
@@ -164,10 +174,11 @@ def main(argv=None) -> int:
     with open(args.log, "w") as log, contextlib.redirect_stdout(Tee(sys.stdout, log)):
         name = torch.cuda.get_device_name(device) if device.startswith("cuda") else "no CUDA: Warp's CPU device"
         print(f"gpu_check on {device} ({name}), torch {torch.__version__}", flush=True)
-        compare_backends(device, checks)
-        throughput(device, args.num_envs, args.steps, args.rounds)
+        checks.run("backends agree", compare_backends, device, checks)
+        checks.run("throughput", throughput, device, args.num_envs, args.steps, args.rounds)
         if args.train_minutes > 0:
-            train(device, args.train_minutes, args.train_num_envs, args.train_max_iterations, args.log_root, checks)
+            checks.run("training", train, device, args.train_minutes, args.train_num_envs, args.train_max_iterations,
+                       args.log_root, checks)
         print(f"checks failed: {', '.join(checks.failed)}" if checks.failed else "all checks passed", flush=True)
     return 1 if checks.failed else 0
 
