@@ -58,7 +58,7 @@ def run(out_dir, quick: bool = False) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n = 121 if quick else 1441  # both include 0, pi/2, pi, 3pi/2 and 2pi exactly on the grid
-    phase = torch.linspace(0.0, 2.0 * math.pi, n, dtype=torch.float64)
+    phase = torch.linspace(0.0, 2.0 * math.pi, n, dtype=torch.float64, device="cpu")
     values = {c.name: curve_values(c, phase) for c in CURVES}
     fps = {c.name: [(p.phase, p.stability) for p in fixed_points(GRF, c.omega, c.sigma, c.xi)] for c in CURVES}
 

@@ -215,7 +215,7 @@ def rpd_timeseries(
 def classify(rpd, max_distance=TRANSITION_DISTANCE):
     """(labels, distances) for RPD vectors (..., 3): the nearest ideal gait's name, or 'transition'
     beyond max_distance or for a NaN (invalid) RPD, and the distance to the nearest gait (NaN if invalid)."""
-    idx, dist = oscillators.classify_rpd(torch.as_tensor(np.asarray(rpd, float)), max_distance)
+    idx, dist = oscillators.classify_rpd(torch.as_tensor(np.asarray(rpd, float), device="cpu"), max_distance)
     return _LABEL_NAMES[idx.numpy()], dist.numpy()
 
 

@@ -86,6 +86,7 @@ class LeggedRobot:
             termination_sensors=tuple(cfg.sim.termination_sensors),
             device=self.device,
             num_threads=cfg.sim.num_threads,
+            cuda_graphs=cfg.sim.cuda_graphs,
         )
         self._init_timing()
         self._init_buffers()
@@ -226,6 +227,8 @@ class LeggedRobot:
         self.common_step_counter += 1
         self._update_state(state)
         self._after_physics()
+        # Index lists (a host sync each on CUDA) only where they size random draws: a draw per chosen
+        # env keeps the random stream, and with it every seeded run, what it was.
         resample = (self.episode_length_buf % self.resample_interval == 0).nonzero().flatten()
         self._resample_commands(resample)
         if self.cfg.push.enabled and self.common_step_counter % self.push_interval == 0:
@@ -235,8 +238,9 @@ class LeggedRobot:
         self.reset_buf = self.terminated | self.time_outs
         self._compute_reward()
         self.tracking_error_sum += torch.norm(self.commands[:, :2] - self.base_lin_vel[:, :2], dim=1)
-        self._log_episodes(self.reset_buf.nonzero().flatten())
-        self._reset_envs(self.terminated, self.time_outs)
+        done_ids = self.reset_buf.nonzero().flatten()  # one list for the logs and the resets
+        self._log_episodes(done_ids)
+        self._reset_envs(done_ids, self.terminated, self.time_outs)
 
     def _after_physics(self) -> None:
         """Hook for tasks: state is current, rewards not yet computed (oscillators integrate here)."""
@@ -282,17 +286,17 @@ class LeggedRobot:
     def reset(self):
         """Reset every env; returns the first observations."""
         everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
-        self._reset_envs(everyone, torch.zeros_like(everyone))
+        self._reset_envs(torch.arange(self.num_envs, device=self.device), everyone, torch.zeros_like(everyone))
         self.rew_buf = torch.zeros(self.num_envs, device=self.device)
         self.reset_buf = torch.zeros_like(everyone)
         return self.get_observations()
 
-    def _reset_envs(self, terminated: torch.Tensor, timed_out: torch.Tensor) -> None:
-        """Terminated envs are re-initialised; of the timed-out ones only a share (timeout_reset_ratio)."""
-        flagged = terminated | timed_out
-        env_ids = flagged.nonzero().flatten()
+    def _reset_envs(self, env_ids: torch.Tensor, terminated: torch.Tensor, timed_out: torch.Tensor) -> None:
+        """Envs env_ids (those terminated or timed out) start a new episode; terminated ones are
+        re-initialised, and of the timed-out ones only a share (timeout_reset_ratio)."""
         if len(env_ids) == 0:
             return
+        flagged = terminated | timed_out
         keep_going = timed_out & ~terminated
         keep_going &= torch.rand(self.num_envs, generator=self.generator, device=self.device) >= (
             self.cfg.init_state.timeout_reset_ratio

@@ -28,6 +28,9 @@ class SimCfg:
     backend: str = "mujoco"  # 'mujoco' (CPU threads) or 'warp' (MuJoCo Warp, optional extra)
     model_path: str = "resources/robots/mini_cheetah/scene.xml"  # relative paths are from the repository root
     num_threads: int = 0  # 0: all cores
+    # 'warp' on CUDA: replay each control step as a CUDA graph; false steps eagerly (~13x slower), for a
+    # driver older than 12.4 or a memory pool that is off (with true those refuse to start).
+    cuda_graphs: bool = True
     foot_sensors: tuple[str, ...] = ("RF_foot_force", "LF_foot_force", "RH_foot_force", "LH_foot_force")
     termination_sensors: tuple[str, ...] = ("base_force",)
     termination_force: float = 1.0  # [N] contact force on those bodies that ends an episode

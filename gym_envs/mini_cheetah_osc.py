@@ -220,12 +220,14 @@ class MiniCheetahOsc(MiniCheetah):
         super()._log_episodes(env_ids)
         # Which relative phases the moving robots' oscillators hold right now: if coupling pulls every
         # robot into one pattern, the policy never sees (and never learns to follow) the others.
-        moving = oscillators.standing_speed(self.commands, self.cfg.osc.standing_rule) >= self.cfg.osc.stand_threshold
-        if moving.any():
-            labels, _ = oscillators.classify_rpd(oscillators.relative_phases(self.phase[moving]))
-            shares = torch.bincount(labels, minlength=len(oscillators.GAIT_NAMES) + 1).float() / len(labels)
-            for name, share in zip(oscillators.GAIT_NAMES + ("transition",), shares):
-                self.extras["log"][f"Oscillator_gait/{name}"] = share
+        # Counted on the device (no host sync); a step with no robot moving logs zeros.
+        speed = oscillators.standing_speed(self.commands, self.cfg.osc.standing_rule)
+        moving = (speed >= self.cfg.osc.stand_threshold).float()
+        labels, _ = oscillators.classify_rpd(oscillators.relative_phases(self.phase))
+        counts = torch.zeros(len(oscillators.GAIT_NAMES) + 1, device=self.device).index_add_(0, labels, moving)
+        shares = counts / moving.sum().clamp(min=1.0)
+        for name, share in zip(oscillators.GAIT_NAMES + ("transition",), shares):
+            self.extras["log"][f"Oscillator_gait/{name}"] = share
 
     # observations: cos block then sin block, as in the released code
     def _obs_oscillator_obs(self):

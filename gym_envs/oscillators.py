@@ -81,7 +81,7 @@ def oscillator_params(
     coupling_enabled=False (ORC C=0) makes sigma exactly 0 everywhere, with no jitter: unlike the
     released code, which kept sigma=4 while standing and a half-normal sigma while moving.
     """
-    v = torch.as_tensor(command_vx).reshape(-1, 1)
+    v = command_vx.reshape(-1, 1)
     if not torch.is_floating_point(v):
         v = v.float()
     speed = v.abs()
@@ -191,17 +191,18 @@ def initial_phases(
         raise ValueError(f"unknown phase init mode {mode!r}; valid modes: {', '.join(PHASE_INIT_MODES)}")
     if mode == "standing":
         return torch.full((num_envs, 4), 1.5 * math.pi, dtype=dtype, device=device)
+    # Drawn on the generator's device (torch refuses a generator on another), built there, then moved.
+    draw_device = generator.device if generator is not None else device
     if mode == "random":
-        phase = TWO_PI * _rand((num_envs, 4), dtype, generator)
+        phase = TWO_PI * torch.rand((num_envs, 4), dtype=dtype, device=draw_device, generator=generator)
     else:
-        ideal = torch.tensor([(0.0,) + IDEAL_RPD[g] for g in GAIT_NAMES], dtype=dtype)
+        ideal = torch.tensor([(0.0,) + IDEAL_RPD[g] for g in GAIT_NAMES], dtype=dtype, device=draw_device)
         if mode == "any_gait":
-            which = torch.randint(len(GAIT_NAMES), (num_envs,), generator=generator,
-                                  device=generator.device if generator is not None else None)
-            rel = ideal[which.cpu()]
+            which = torch.randint(len(GAIT_NAMES), (num_envs,), generator=generator, device=draw_device)
+            rel = ideal[which]
         else:
             rel = ideal[GAIT_NAMES.index(mode)]
-        phase = TWO_PI * _rand((num_envs, 1), dtype, generator) - rel
+        phase = TWO_PI * torch.rand((num_envs, 1), dtype=dtype, device=draw_device, generator=generator) - rel
         phase = torch.remainder(phase, TWO_PI)
         phase = torch.where(phase >= TWO_PI, phase - TWO_PI, phase)
     return phase.to(device) if device is not None else phase
@@ -238,7 +239,7 @@ def fixed_points(grf: float, omega: float, coupling: float, offset: float, tol: 
         probe = min(probe, 0.25 * min(2.0 * a, TWO_PI - 2.0 * a))
 
     def vel(p):
-        return float(oscillator_velocity(torch.tensor(p, dtype=torch.float64), grf, omega, coupling, offset))
+        return float(oscillator_velocity(torch.tensor(p, dtype=torch.float64, device="cpu"), grf, omega, coupling, offset))
 
     out = []
     for r in roots:
@@ -263,8 +264,3 @@ def _randn(shape, dtype, device, generator):
 def _randn_like(x, generator):
     return _randn(x.shape, x.dtype, x.device, generator)
 
-
-def _rand(shape, dtype, generator):
-    if generator is None:
-        return torch.rand(shape, dtype=dtype)
-    return torch.rand(shape, dtype=dtype, device=generator.device, generator=generator)

@@ -94,7 +94,7 @@ def thread_share(ranks: Ranks) -> int:
 
 def shared_random_seed() -> int:
     """A fresh seed drawn by rank 0 and given to every rank (each then adds its rank)."""
-    seed = torch.tensor([random.SystemRandom().randrange(10000)])
+    seed = torch.tensor([random.SystemRandom().randrange(10000)], device="cpu")
     if dist.is_initialized():
         if dist.get_backend() == "nccl":
             seed = seed.cuda()

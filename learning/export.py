@@ -54,7 +54,7 @@ def deployment_metadata(task, checkpoint: str = "") -> dict:
     cfg, model = task.cfg, task.sim.model
 
     def floats(t) -> list[float]:
-        return [float(v) for v in torch.as_tensor(t).flatten()]
+        return [float(v) for v in torch.as_tensor(t, device="cpu").flatten()]
 
     meta = {
         "task": type(task).__name__,
@@ -158,10 +158,11 @@ class Controller(nn.Module):
         return self.default_joint_pos + actions * self.action_scale, new_phase
 
     def example_inputs(self) -> tuple[torch.Tensor, ...]:
-        j, legs = self.default_joint_pos.numel(), self.num_legs
-        return (torch.zeros(1, 3), torch.tensor([[0.0, 0.0, -1.0]]), self.default_joint_pos.reshape(1, j).clone(),
-                torch.zeros(1, j), self.default_joint_pos.reshape(1, j).clone(), torch.zeros(1, self.decimation, legs),
-                torch.zeros(1, 3), torch.zeros(1, legs))
+        j, legs, dev = self.default_joint_pos.numel(), self.num_legs, self.default_joint_pos.device
+        return (torch.zeros(1, 3, device=dev), torch.tensor([[0.0, 0.0, -1.0]], device=dev),
+                self.default_joint_pos.reshape(1, j).clone(), torch.zeros(1, j, device=dev),
+                self.default_joint_pos.reshape(1, j).clone(), torch.zeros(1, self.decimation, legs, device=dev),
+                torch.zeros(1, 3, device=dev), torch.zeros(1, legs, device=dev))
 
 
 @contextlib.contextmanager

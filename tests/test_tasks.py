@@ -125,6 +125,13 @@ def test_oscillator_gait_mix_is_logged():
     log = extras["log"]
     assert log["Oscillator_gait/trot"] == pytest.approx(1.0)  # sigma = 0 keeps the started pattern
     assert sum(float(log[f"Oscillator_gait/{g}"]) for g in ("trot", "pace", "bound", "pronk", "transition")) == 1.0
+    env.commands[8:, 0] = 0.0  # standing robots are left out of the shares
+    env.phase[8:] = 1.5 * math.pi  # all legs in phase: pronk
+    env._log_episodes(torch.arange(0))
+    assert env.extras["log"]["Oscillator_gait/pronk"] == 0.0
+    env.commands[:, 0] = 0.0  # nobody moving: counted on the device, so zeros rather than no entry
+    env._log_episodes(torch.arange(0))
+    assert all(float(share) == 0.0 for key, share in env.extras["log"].items() if key.startswith("Oscillator_gait/"))
 
 
 def test_unknown_task_lists_the_known_ones():

@@ -175,3 +175,24 @@ def test_randomisation_is_per_env(warp3):
 def test_wrong_control_shape_is_named(warp3):
     with pytest.raises(ValueError, match=r"shape \(3, 12\).*got \(3, 11\)"):
         warp3.step(torch.zeros(3, 11), SUBSTEPS)
+
+
+def test_status_line_says_graphs_are_off_on_the_cpu_and_when_they_would_run(capsys):
+    sim = build("warp", 1)
+    line = capsys.readouterr().out.splitlines()[0]
+    assert line == sim.graph_status
+    assert line == ("warp on cpu: CUDA graphs off (Warp's CPU device; a CUDA device would use them given "
+                    "driver >= 12.4 and Warp's memory pool)")
+
+
+@pytest.mark.parametrize("driver, mempool, requested, on, why", [
+    ((12, 8), True, True, True, "driver 12.8, memory pool on"),
+    ((12, 2), True, True, False, "driver 12.2; graphs need driver >= 12.4"),
+    (None, False, True, False, "no CUDA driver version, memory pool off; graphs need"),
+    ((12, 2), False, False, False, "eager by request: sim.cuda_graphs=false"),
+])
+def test_graph_decision_on_cuda_names_what_is_missing(driver, mempool, requested, on, why):
+    from gym_envs.sim.mujoco_warp import graph_decision
+
+    use, reason = graph_decision(True, driver, mempool, requested)
+    assert use is on and reason.startswith(why)

@@ -32,6 +32,7 @@ class MujocoBatchBackend(MujocoModelBackend):
         base_body: str = "base",
         device: str | torch.device = "cpu",
         num_threads: int = 0,
+        cuda_graphs: bool = True,  # the Warp backend's knob; nothing to capture here
     ):
         self.device = torch.device(device)
         m = self._read_model(model_path, num_envs, foot_sensors, termination_sensors, ground_geom, base_body)

@@ -13,8 +13,11 @@ Same interface and semantics as the CPU backend (`mujoco_batch.py`); what differ
   checks for divergence and puts blown-up envs back to the keyframe. On CUDA the
   whole control step (after the control copy) is captured once per substep count as a
   CUDA graph and replayed; the first step with a given count runs eagerly (it compiles
-  the kernels; capture needs them loaded). If capture fails, stepping goes on eagerly
-  with a warning.
+  the kernels; capture needs them loaded). Eager stepping is ~13x slower (MJWarp's own
+  figures) and syncs the host in every solver iteration (`capture_while` without a graph),
+  so it is never a silent fallback: the preconditions are checked at construction, one
+  line says whether graphs run and why, and a device that cannot run them, or a failed
+  capture, raises unless the user chose eager stepping (`cuda_graphs=False`).
 * Contact forces. MJWarp 4.0 evaluates contact sensors with reduce="netforce" itself
   (`sensor.py`, reduce == 3), so the model's foot/base force sensors are read from
   `sensordata` exactly as on the CPU; nothing is recomputed from the contact arrays.
@@ -38,7 +41,7 @@ Same interface and semantics as the CPU backend (`mujoco_batch.py`); what differ
 from __future__ import annotations
 
 import contextlib
-import warnings
+import gc
 
 import mujoco
 import numpy as np
@@ -80,6 +83,10 @@ _PLANE_CONTACTS = {
     int(mujoco.mjtGeom.mjGEOM_BOX): 4,
 }
 _OTHER_PAIR_CONTACTS = 8  # generous bound for any other pair (meshes, box-box)
+
+# MJWarp's solver loop is a `capture_while`: a conditional graph node, which needs CUDA driver 12.4.
+GRAPH_MIN_DRIVER = (12, 4)
+EAGER_OPT_IN = "sim.cuda_graphs=false runs eagerly (~13x slower)"
 
 
 # --- kernels ------------------------------------------------------------------------------------
@@ -220,8 +227,9 @@ class MujocoWarpBackend(MujocoModelBackend):
 
     device: where the task's tensors live. warp_device: where the simulation runs, by default
     the same device ('cuda:i' for a torch 'cuda:i', else Warp's 'cpu'). num_threads is
-    accepted for the CPU backend's sake and ignored. use_cuda_graphs: replay each control
-    step as a captured CUDA graph (CUDA only).
+    accepted for the CPU backend's sake and ignored. cuda_graphs: replay each control step
+    as a captured CUDA graph (CUDA only); False chooses eager stepping. `graph_status` is the
+    line printed at construction: graphs on or off, and why.
     """
 
     def __init__(
@@ -235,7 +243,7 @@ class MujocoWarpBackend(MujocoModelBackend):
         device: str | torch.device = "cpu",
         num_threads: int = 0,  # the CPU backend's knob; Warp schedules its own threads
         warp_device: str | None = None,
-        use_cuda_graphs: bool = True,
+        cuda_graphs: bool = True,
     ):
         self.device = torch.device(device)
         if self.device.type == "cuda" and not torch.cuda.is_available():
@@ -288,7 +296,13 @@ class MujocoWarpBackend(MujocoModelBackend):
         self._joint_qvel_t = torch.as_tensor(self._joint_qvel, device=self._view_device)
 
         self._records: dict[int, tuple] = {}  # substeps -> (foot_forces wp, joint_torques wp, torch views)
-        self._use_graphs = self._cuda and use_cuda_graphs
+        self._use_graphs, reason = graph_decision(
+            self._cuda, wp.get_cuda_driver_version(), self._cuda and wp.is_mempool_enabled(self._wp_device), cuda_graphs
+        )
+        if cuda_graphs and self._cuda and not self._use_graphs:
+            raise SimSetupError(f"CUDA graphs cannot run on {self._wp_device}: {reason}; {EAGER_OPT_IN}")
+        self.graph_status = f"warp on {self._wp_device}: CUDA graphs {'on' if self._use_graphs else 'off'} ({reason})"
+        print(self.graph_status, flush=True)
         self._graphs: dict[int, object] = {}
         self._stepped_eagerly: set[int] = set()
         self._reset_all_to_home()
@@ -324,21 +338,26 @@ class MujocoWarpBackend(MujocoModelBackend):
             graph = self._graphs.get(num_substeps)
             if graph is None:
                 graph = self._capture(num_substeps)
-            if graph is not None:
-                wp.capture_launch(graph, stream=self._stream)
-                return
+            wp.capture_launch(graph, stream=self._stream)
+            return
         self._launch_control_step(num_substeps)
         self._stepped_eagerly.add(num_substeps)
 
     def _capture(self, num_substeps: int):
+        # A collection during capture can run a stale graph's destructor, recorded into the new
+        # graph, which then frees memory on replay: no collections until the capture ends.
+        collecting = gc.isenabled()
+        gc.disable()
         try:
             # The eager run before loaded every module the step uses; loading all of MJWarp's is not needed.
             with wp.ScopedCapture(device=self._wp_device, stream=self._stream, force_module_load=False) as capture:
                 self._launch_control_step(num_substeps)
-        except Exception as err:  # a driver without graph support, a host read inside a kernel chain
-            warnings.warn(f"CUDA graph capture of the substep loop failed, stepping without graphs: {err}")
-            self._use_graphs = False
-            return None
+        except Exception as err:  # a host read inside the kernel chain, an allocation the pool refused
+            raise SimSetupError(f"CUDA graph capture of the control step failed on {self._wp_device}: {err}; "
+                                f"{EAGER_OPT_IN}") from err
+        finally:
+            if collecting:
+                gc.enable()
         self._graphs[num_substeps] = capture.graph
         return capture.graph
 
@@ -476,8 +495,26 @@ class MujocoWarpBackend(MujocoModelBackend):
         return torch.as_tensor(as_index(env_ids), device=self._view_device)
 
     def _values(self, values) -> torch.Tensor:
-        return torch.as_tensor(values, dtype=torch.float32).to(self._view_device)
+        return torch.as_tensor(values, dtype=torch.float32, device=self._view_device)
 
+
+
+def graph_decision(is_cuda: bool, driver: tuple[int, int] | None, mempool_enabled: bool,
+                   requested: bool) -> tuple[bool, str]:
+    """Whether the control step runs as a CUDA graph, and why (for the status line)."""
+    if not requested:
+        return False, f"eager by request: {EAGER_OPT_IN}"
+    needs = f"driver >= {GRAPH_MIN_DRIVER[0]}.{GRAPH_MIN_DRIVER[1]} and Warp's memory pool"
+    if not is_cuda:
+        return False, f"Warp's CPU device; a CUDA device would use them given {needs}"
+    missing = []
+    if driver is None or driver < GRAPH_MIN_DRIVER:
+        missing.append("no CUDA driver version" if driver is None else f"driver {driver[0]}.{driver[1]}")
+    if not mempool_enabled:
+        missing.append("memory pool off")
+    if missing:
+        return False, f"{', '.join(missing)}; graphs need {needs}"
+    return True, f"driver {driver[0]}.{driver[1]}, memory pool on"
 
 
 def _warp_device(device: torch.device, warp_device: str | None):
