@@ -58,6 +58,7 @@ def test_every_orc_and_the_plain_task_keep_to_the_env_device():
     with forgotten_device_fails():
         for orc in ALL_ORC:
             stepped_env(orc=orc)
+        stepped_env(standing_rule="command")
         stepped_env("mini_cheetah")
 
 
