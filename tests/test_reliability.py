@@ -227,6 +227,11 @@ def test_older_runs_keep_the_yaw_term_they_trained_with():
 
 
 def test_a_format_0_run_that_names_its_yaw_term_keeps_it(run_copy):
+    path = os.path.join(run_copy, runs.ENV_YAML)
+    text = open(path).read()
+    assert re.search(r"^  yaw_tracking: \w+$", text, re.M)
+    with open(path, "w") as f:
+        f.write(re.sub(r"^  yaw_tracking: \w+$", "  yaw_tracking: sqexp", text, flags=re.M))
     os.remove(os.path.join(run_copy, runs.FORMAT_YAML))
     assert runs.load_run_configs(run_copy)[1].rewards.yaw_tracking == "sqexp"
 
