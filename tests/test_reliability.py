@@ -429,3 +429,34 @@ def test_an_analysis_finds_an_unwritable_out_before_its_rollouts(tiny_run, tmp_p
     out = tmp_path / "a_file" / "results"  # a folder under a file: no one can write it
     assert balanced_legs.main(["--runs", tiny_run, "--out", str(out), "--quick"]) == 1
     assert f"--out {out} cannot be written (Not a directory); choose a folder" in one_line(capsys)
+
+
+def config_keys_digest() -> str:
+    """A digest of every key of every task's default env and train configs."""
+    import hashlib
+
+    from gym_envs.config import to_dict
+    from gym_envs.registry import TASKS, env_cfg_class
+    from learning.runner_config import train_cfg_class
+
+    def keys(data, prefix=""):
+        for key, value in data.items():
+            # dict-valued entries such as rewards.weights hold names, not config keys
+            if isinstance(value, dict) and key not in ("weights", "scales", "noise"):
+                yield from keys(value, f"{prefix}{key}.")
+            else:
+                yield prefix + key
+
+    names = sorted({k for task in TASKS for cfg in (env_cfg_class(task)(), train_cfg_class(task)())
+                    for k in keys(to_dict(cfg), type(cfg).__name__ + ":")})
+    return hashlib.sha256("\n".join(names).encode()).hexdigest()[:16]
+
+
+# The config keys' digest that each run format was written with.
+KEYS_OF_FORMAT = {2: "9eacc93b081d44ec"}
+
+
+def test_config_keys_change_only_with_the_run_format():
+    assert config_keys_digest() == KEYS_OF_FORMAT.get(runs.RUN_FORMAT), (
+        f"the config keys changed (digest {config_keys_digest()}): bump learning.runs.RUN_FORMAT so that saved "
+        f"runs of the old format stay loadable, and record the digest in KEYS_OF_FORMAT")
