@@ -343,3 +343,50 @@ def test_print_config_shows_the_resolved_configs_as_set_keys_and_writes_nothing(
     data = yaml.safe_load(capsys.readouterr().out)
     assert data["commands"]["lin_vel_x"] == [1.5, 1.5] and data["push"]["enabled"] is False
     assert data["train"]["num_steps_per_env"] == 8
+
+
+STUDY_POLICY = os.path.join(REPO, "resources", "study", "E15_ORC_111")
+
+
+def test_viewer_arrow_keys_turn_robot_0(monkeypatch, tmp_path, capsys):
+    """The viewer's left arrow twice (+1 rad/s yaw) turns robot 0 by > 0.5 rad in 2 s: with the recipe study's
+    E15 ORC-111, which was trained to turn (the shipped policies walk forward only)."""
+    import math
+
+    import mujoco.viewer
+
+    class Window:  # the passive viewer, offscreen: stays open, draws nothing
+        def is_running(self):
+            return True
+
+        def sync(self):
+            pass
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(mujoco.viewer, "launch_passive", lambda *a, **k: Window())
+    args = play.build_parser().parse_args(["--load_run", STUDY_POLICY, "--num_envs", "1", "--num_threads", "1",
+                                           "--headless", "--log_root", str(tmp_path)])
+    session = play.Session(args)
+    viewer = play.Viewer(session, [1.0, 0.0, 0.0])
+    viewer._key(play.KEY_LEFT)
+    viewer._key(play.KEY_LEFT)
+    obs = session.env.get_observations()
+
+    def heading():
+        w, x, y, z = session.task.state.base_quat[0].tolist()
+        return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+    turned, last = 0.0, None
+    for _ in range(round(2.0 / session.env.dt)):
+        viewer.update()
+        with torch.inference_mode():
+            obs, *_ = session.env.step(session.policy(obs))
+        now = heading()
+        if last is not None:
+            turned += math.remainder(now - last, 2 * math.pi)
+        last = now
+    assert session.task.commands[0].tolist() == pytest.approx([1.0, 0.0, 1.0])
+    assert "command: v_x +1.00  v_y +0.00  yaw +1.00" in capsys.readouterr().out
+    assert turned > 0.5
