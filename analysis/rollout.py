@@ -138,13 +138,14 @@ def load_runs(root: str | None = None) -> list[PolicyRun]:
     return [load_policy_run(d) for d in run_dirs]
 
 
-def load_policy_run(run_dir: str) -> PolicyRun:
-    """Rebuild a run's env config and deterministic actor with learning's loader."""
+def load_policy_run(run_dir: str, checkpoint: int = -1, name: str | None = None) -> PolicyRun:
+    """Rebuild a run's env config and deterministic actor (its newest checkpoint, or `checkpoint`) with
+    learning's loader; named by its last two folders unless `name` is given."""
     from learning.runs import load_policy
 
-    loaded = load_policy(run_dir)
+    loaded = load_policy(run_dir, checkpoint)
     return PolicyRun(
-        name=os.path.relpath(run_dir, os.path.dirname(os.path.dirname(run_dir))),
+        name=name or os.path.relpath(run_dir, os.path.dirname(os.path.dirname(run_dir))),
         env_cfg=loaded.env_cfg,
         policy=loaded.policy,
         task=getattr(loaded, "task", DEFAULT_TASK),

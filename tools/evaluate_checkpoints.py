@@ -17,16 +17,8 @@ import argparse
 import sys
 
 from analysis import envelope, obedience
-from analysis.rollout import PolicyRun
+from analysis.rollout import load_policy_run
 from learning import runs
-
-
-def checkpoint_runs(run_dir: str, checkpoints: list[int]) -> list[PolicyRun]:
-    out = []
-    for it in checkpoints:
-        loaded = runs.load_policy(run_dir, it)
-        out.append(PolicyRun(f"it {it}", loaded.env_cfg, loaded.policy, path=run_dir))
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -45,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"evaluate_checkpoints: error: no checkpoints {missing or wanted} in {args.run_dir} "
               f"(it has {available})", file=sys.stderr)
         return 1
-    policies = checkpoint_runs(args.run_dir, wanted)
+    policies = [load_policy_run(args.run_dir, it, name=f"it {it}") for it in wanted]
     env_results = envelope.measure(policies, robots=args.robots, num_threads=args.num_threads,
                                    **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
     obeyed = obedience.measure(policies, robots=args.robots, settle_robots=args.robots, settle_duration_s=10.0,
