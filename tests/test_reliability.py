@@ -347,6 +347,8 @@ CTRL_C_AT_TORCH = """
 import builtins, os, runpy, signal, sys
 sys.path.insert(0, os.getcwd())
 target, sys.argv = sys.argv[1], sys.argv[1:]
+# A process whose parent ignored SIGINT inherits that, and then no Ctrl-C reaches it; a terminal's does.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 real_import = builtins.__import__
 
 def ctrl_c_at_torch(name, *args, **kwargs):
