@@ -137,5 +137,7 @@ def test_video_without_working_offscreen_gl_is_one_line_before_anything_is_writt
         pytest.skip("OSMesa renders on this machine")
     assert proc.returncode == 1, proc.stderr
     err = proc.stderr.strip()
-    assert "\n" not in err and "offscreen rendering failed with MUJOCO_GL=osmesa" in err and "MUJOCO_GL=egl" in err
+    # Where libOSMesa is installed but cannot render, the renderer fails; where it is missing, importing mujoco does.
+    failure = ("offscreen rendering failed with MUJOCO_GL=osmesa", "cannot load the OpenGL backend MUJOCO_GL=osmesa")
+    assert "\n" not in err and any(text in err for text in failure) and "MUJOCO_GL=egl" in err, err
     assert os.listdir(tmp_path) == []
