@@ -96,7 +96,8 @@ def train_one(args, orc: str, seed: int, stop: StopRequest) -> str:
             print(f"training {run_dir}", flush=True)
         runner.attach_run_dir(run_dir, progress_prefix=f"[ORC_{orc} seed{seed}] ")
         start = time.perf_counter()
-        finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
+        finished = runner.learn(train_cfg.max_iterations - runner.current_learning_iteration,
+                                  train_cfg.init_at_random_ep_len, stop)
         logger = runner.logger
         status = {
             "orc": orc,

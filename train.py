@@ -339,7 +339,8 @@ def _main(args: argparse.Namespace) -> int:
             print(f"run folder {run_dir}{resuming}", flush=True)
 
         with StopRequest(announce=setup.rank == 0) as stop:
-            finished = runner.train(train_cfg.max_iterations, train_cfg.init_at_random_ep_len, stop)
+            finished = runner.learn(train_cfg.max_iterations - runner.current_learning_iteration,
+                                    train_cfg.init_at_random_ep_len, stop)
         if finished:
             return 0
         if setup.rank == 0:

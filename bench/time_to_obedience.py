@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     while clock < args.max_minutes * 60 and (obedient is None or walking is None):
         start = time.perf_counter()
         first = runner.current_learning_iteration == 0
-        runner.train(runner.current_learning_iteration + args.eval_every, init_at_random_ep_len=first)
+        runner.learn(args.eval_every, init_at_random_ep_len=first)
         clock += time.perf_counter() - start
         it = runner.current_learning_iteration
         actor = DeterministicActor(runner.alg.get_policy())

@@ -1,18 +1,20 @@
-"""OnPolicyRunner with orcgym's run conventions.
+"""rsl-rl-lib's OnPolicyRunner and its training loop (`learn`), with orcgym's run conventions hung on its hooks.
 
-Differences from rsl-rl-lib's runner (its PPO, models, storage and tensorboard logging are used
-as they are):
+What differs from rsl-rl-lib's runner (its loop, PPO, models, storage and tensorboard logging are used as
+they are):
   * iterations are counted as *completed* iterations: `model_<n>.pt` holds the networks after n
-    PPO updates and records iter=n, and resuming from it runs iteration index n next (rsl-rl's own
-    loop would repeat index n-1);
+    PPO updates and records iter=n, and resuming from it runs iteration index n next;
   * checkpoints are written atomically and loaded with weights_only=True, after checking that
     their network sizes fit the task;
-  * a stop request (Ctrl-C, see `StopRequest`) ends training at the next env step: the partial
-    rollout is dropped and the last completed iteration is saved;
+  * a stop request (Ctrl-C or SIGTERM, see `StopRequest`) ends training at the next env step: the
+    partial rollout is dropped and the last completed iteration is saved;
   * one compact progress line per iteration instead of rsl-rl's block; `Perf/env_steps_per_s`
-    (rollout throughput) is logged to tensorboard beside rsl-rl's `Perf/total_fps`;
+    (rollout throughput) is logged to tensorboard beside rsl-rl's `Perf/total_fps`; clips of robot 0
+    while training (learning.video);
   * under torchrun the process group's backend follows the device (gloo on CPU, NCCL on CUDA; see
     learning.distributed) instead of rsl-rl's NCCL-only `cuda:<local_rank>` set-up.
+The per-step and per-iteration work runs in rsl-rl's logger callbacks (`ProgressLogger`), which its loop
+calls after every env step and every update.
 """
 
 from __future__ import annotations
@@ -23,11 +25,9 @@ import io
 import pathlib
 import signal
 import statistics
-import time
 
 import torch
 from rsl_rl.runners import OnPolicyRunner
-from rsl_rl.utils import check_nan
 from rsl_rl.utils.log_writer import LogWriter
 from rsl_rl.utils.logger import Logger
 
@@ -88,45 +88,77 @@ class StopRequest:
 
 
 class ProgressLogger(Logger):
-    """rsl-rl's tensorboard logging with a one-line console summary per iteration."""
+    """rsl-rl's tensorboard logging with a one-line console summary per iteration, and the runner's hooks.
+
+    rsl-rl's loop calls `process_env_step` after every env step and `log` after every update; TaskRunner
+    hangs its per-step and per-iteration work (video, stop requests) there through `after_step` and
+    `after_iteration`, so that the loop itself stays rsl-rl's.
+    """
 
     prefix = ""
     # Means over the episodes that ended in the last logged iteration (None before any ended).
     last_reward: float | None = None
     last_tracking_error: float | None = None
+    on_start = after_step = after_iteration = before_stop = staticmethod(lambda *args: None)
 
-    def log(self, it, start_it, total_it, collect_time, learn_time, loss_dict, learning_rate, action_std,
-            rnd_weight, print_minimal=False, width=80, pad=40) -> None:
-        if self.writer is None:
-            return
+    def init_logging_writer(self) -> None:
+        with quiet():
+            super().init_logging_writer()
+        self.on_start()
+
+    def process_env_step(self, *args, **kwargs) -> None:
+        super().process_env_step(*args, **kwargs)
+        self.after_step()
+
+    def log(self, **kwargs) -> None:
+        # rsl-rl's `it` is the completed count here (see TaskRunner.learn); its events keep the index of the
+        # iteration (0 for the first), as they always had.
+        completed = kwargs["it"]
+        if self.writer is not None:
+            self._record(completed, kwargs)
+        self.after_iteration(completed)
+
+    def _record(self, completed: int, kwargs: dict) -> None:
+        it, start, total = completed - 1, kwargs["start_it"] - 1, kwargs["total_it"] - 1
         errors = [float(e["Episode/tracking_error"]) for e in self.ep_extras if "Episode/tracking_error" in e]
         if errors:
             self.last_tracking_error = statistics.mean(errors)
         if self.rewbuffer:
             self.last_reward = statistics.mean(self.rewbuffer)
         with quiet():
-            super().log(it, start_it, total_it, collect_time, learn_time, loss_dict, learning_rate, action_std,
-                        rnd_weight, print_minimal, width, pad)
+            super().log(**{**kwargs, "it": it, "start_it": start, "total_it": total})
+        collect_time, learn_time = kwargs["collect_time"], kwargs["learn_time"]
         steps = self.cfg["num_steps_per_env"] * self.num_envs * self.gpu_world_size
         env_sps = steps / max(collect_time, 1e-9)
         self.writer.add_scalar("Perf/env_steps_per_s", env_sps, it)
-        done = it + 1 - start_it
-        eta = self.tot_time / done * (total_it - it - 1)
+        eta = self.tot_time / (completed - start) * (total - completed)
         reward = f"{statistics.mean(self.rewbuffer):8.3f}" if self.rewbuffer else "       -"
         ep_len = f"{statistics.mean(self.lenbuffer):6.1f}" if self.lenbuffer else "     -"
         print(
-            f"{self.prefix}it {it + 1:>{len(str(total_it))}}/{total_it} | "
+            f"{self.prefix}it {completed:>{len(str(total))}}/{total} | "
             f"{steps / (collect_time + learn_time):9,.0f} steps/s (env {env_sps:,.0f}) | "
-            f"reward {reward} | ep len {ep_len} | value loss {loss_dict['value']:.4f} | lr {learning_rate:.1e} | "
-            f"ETA {datetime.timedelta(seconds=int(eta))}",
+            f"reward {reward} | ep len {ep_len} | value loss {kwargs['loss_dict']['value']:.4f} | "
+            f"lr {kwargs['learning_rate']:.1e} | ETA {datetime.timedelta(seconds=int(eta))}",
             flush=True,
         )
 
+    def stop_logging_writer(self) -> None:
+        """Flush and close the writer (rsl-rl leaves tensorboard's open); called at the end and at a stop."""
+        self.before_stop()
+        if self.writer is not None:
+            self.writer.flush()
+            self.writer.close()
+            super().stop_logging_writer()  # W&B / Neptune: finish the remote run
+            self.writer = None
 
     def save_video(self, path: str, it: int) -> None:
         """Upload a clip finished after the last `log` (rsl-rl's `log` uploads the others; W&B only)."""
         if isinstance(self.writer, LogWriter):
             self.writer.save_video(pathlib.Path(path), it)
+
+
+class _Stopped(Exception):
+    """Leaves rsl-rl's loop when a stop was requested."""
 
 
 class TaskRunner(OnPolicyRunner):
@@ -143,6 +175,9 @@ class TaskRunner(OnPolicyRunner):
             gpu_world_size=self.gpu_world_size, gpu_global_rank=self.gpu_global_rank, device=self.device,
         )
         self.logger.git_status_repos = [runs.REPO_ROOT]
+        self.logger.on_start, self.logger.after_step = self._on_start, self._after_step
+        self.logger.after_iteration, self.logger.before_stop = self._after_iteration, self._close_video
+        self._stop, self._completed, self._last_saved = StopRequest(), 0, None
         self.log_dir = log_dir
         self.video = None  # a learning.video.TrainingVideo records clips of robot 0 while training when set
 
@@ -158,7 +193,7 @@ class TaskRunner(OnPolicyRunner):
                                      "world_size": ranks.world_size}
 
     def attach_run_dir(self, run_dir: str, progress_prefix: str = "") -> None:
-        """Where checkpoints and tensorboard events go (set before `train`)."""
+        """Where checkpoints and tensorboard events go (set before `learn`)."""
         self.log_dir = self.logger.log_dir = run_dir
         self.logger.prefix = progress_prefix
         if self.video is not None:
@@ -182,82 +217,63 @@ class TaskRunner(OnPolicyRunner):
 
     # --- training ------------------------------------------------------------------------------
 
-    def learn(self, num_learning_iterations: int, init_at_random_ep_len: bool = False) -> None:
-        self.train(self.current_learning_iteration + num_learning_iterations, init_at_random_ep_len)
+    def learn(self, num_learning_iterations: int, init_at_random_ep_len: bool = True,
+              stop: StopRequest | None = None) -> bool:
+        """rsl-rl's `learn` for `num_learning_iterations` more iterations; False if `stop` cut it short.
 
-    def train(self, until: int, init_at_random_ep_len: bool = True, stop: StopRequest | None = None) -> bool:
-        """Run PPO iterations until `until` have completed; False if a stop request cut it short.
-
-        Checkpoints: model_0 before a fresh start, every save_interval completed iterations, at the
-        end, and at a stop.
+        Checkpoints: model_0 before a fresh start, every save_interval completed iterations, at the end
+        and at a stop. A stop ends the run at the next env step (the partial rollout is dropped); under
+        torchrun after the current update, at the same iteration on every rank.
         """
-        stop = stop or StopRequest()
-        env, alg, cfg = self.env, self.alg, self.cfg
-        if init_at_random_ep_len:
-            env.episode_length_buf = torch.randint_like(env.episode_length_buf, high=int(env.max_episode_length))
-        obs = env.get_observations().to(self.device)
-        alg.train_mode()
-        if self.is_distributed:
-            alg.broadcast_parameters()
-        distributed.log_sync_digest([alg.actor, alg.critic], self.current_learning_iteration, self.gpu_global_rank)
-        with quiet():
-            self.logger.init_logging_writer()
-        start = self.current_learning_iteration
+        self._stop = stop or StopRequest()
+        self._completed = start = self.current_learning_iteration
         if start == 0:
             self._save_iteration()
-        finished = True
+        if self.video is not None:
+            self.video.start_iteration(start)
+        # rsl-rl names an iteration by its loop index and saves at index % save_interval == 0. Started one past
+        # the completed count, the index of an iteration whose update is done is the completed count, which is
+        # what checkpoint names here count.
+        self.current_learning_iteration = start + 1
         try:
-            for it in range(start, until):
-                t0 = time.perf_counter()
-                if self.video is not None:
-                    self.video.start_iteration(it)
-                with torch.inference_mode():
-                    for _ in range(cfg["num_steps_per_env"]):
-                        if stop.requested and not self.is_distributed:
-                            break
-                        actions = alg.act(obs)
-                        obs, rewards, dones, extras = env.step(actions.to(env.device))
-                        if self.video is not None:
-                            self.video.after_step()
-                        if cfg.get("check_for_nan", True):
-                            check_nan(obs, rewards, dones)
-                        obs, rewards, dones = obs.to(self.device), rewards.to(self.device), dones.to(self.device)
-                        alg.process_env_step(obs, rewards, dones, extras)
-                        self.logger.process_env_step(rewards, dones, extras, None)
-                    if self._stop_everywhere(stop):
-                        alg.storage.clear()  # drop the partial rollout; the networks are those of `it`
-                        finished = False
-                        break
-                    t1 = time.perf_counter()
-                    alg.compute_returns(obs)
-                losses = alg.update()
-                t2 = time.perf_counter()
-                self.current_learning_iteration = it + 1
-                distributed.log_sync_digest([alg.actor, alg.critic], it + 1, self.gpu_global_rank)
-                self.logger.log(
-                    it=it, start_it=start, total_it=until, collect_time=t1 - t0, learn_time=t2 - t1,
-                    loss_dict=losses, learning_rate=alg.learning_rate, action_std=alg.get_policy().output_std,
-                    rnd_weight=None,
-                )
-                if (it + 1) % cfg["save_interval"] == 0 and it + 1 != until:
-                    self._save_iteration()
+            super().learn(num_learning_iterations, init_at_random_ep_len)
+            return True
+        except _Stopped:
+            self.alg.storage.clear()  # the networks are those of the last completed iteration
+            self.current_learning_iteration = self._completed
             self._save_iteration()
+            return False
         finally:
-            last_clip = self.video.close() if self.video is not None else None
-            if last_clip is not None:
-                self.logger.save_video(last_clip, self.current_learning_iteration)
-            if self.logger.writer is not None:
-                self.logger.writer.flush()
-                self.logger.writer.close()
-                self.logger.stop_logging_writer()  # W&B / Neptune: finish the remote run
-        return finished
+            self.logger.stop_logging_writer()
 
-    def _stop_everywhere(self, stop: StopRequest) -> bool:
+    def _on_start(self) -> None:
+        distributed.log_sync_digest([self.alg.actor, self.alg.critic], self._completed, self.gpu_global_rank)
+
+    def _after_step(self) -> None:
+        if self.video is not None:
+            self.video.after_step()
+        if self._stop.requested and not self.is_distributed:
+            raise _Stopped
+
+    def _after_iteration(self, completed: int) -> None:
+        self._completed = completed
+        distributed.log_sync_digest([self.alg.actor, self.alg.critic], completed, self.gpu_global_rank)
+        if self._stop_everywhere():
+            raise _Stopped
+        if self.video is not None:
+            self.video.start_iteration(completed)
+
+    def _stop_everywhere(self) -> bool:
         if not self.is_distributed:
-            return stop.requested
-        flag = torch.tensor(float(stop.requested), device=self.device)
+            return self._stop.requested
+        flag = torch.tensor(float(self._stop.requested), device=self.device)
         torch.distributed.all_reduce(flag, op=torch.distributed.ReduceOp.MAX)
         return bool(flag.item())
+
+    def _close_video(self) -> None:
+        last_clip = self.video.close() if self.video is not None else None
+        if last_clip is not None:
+            self.logger.save_video(last_clip, self.current_learning_iteration)
 
     def _save_iteration(self) -> None:
         if self.writes_files:
@@ -266,11 +282,15 @@ class TaskRunner(OnPolicyRunner):
     # --- checkpoints ---------------------------------------------------------------------------
 
     def save(self, path: str, infos: dict | None = None) -> None:
+        """Atomic; rsl-rl's loop saves the final iteration twice when it falls on save_interval: once is enough."""
+        if self._last_saved == (path, self.current_learning_iteration):
+            return
         data = self.alg.save()
         data["iter"] = int(self.current_learning_iteration)
         data["infos"] = runs.plain(infos)
         runs.save_checkpoint(data, path)
         self.logger.save_model(path, self.current_learning_iteration)
+        self._last_saved = (path, self.current_learning_iteration)
 
     def load(self, path: str, load_cfg: dict | None = None, strict: bool = True, map_location=None,
              context: str = "this task", cause: str = "") -> dict | None:

@@ -244,11 +244,11 @@ def test_a_checkpoint_with_other_hidden_sizes_is_one_line_naming_the_layer(tmp_p
         narrow.load(path)
 
 
-def test_train_counts_completed_iterations_and_resumes_from_them(tmp_path):
+def test_learn_counts_completed_iterations_and_resumes_from_them(tmp_path):
     torch.manual_seed(0)
     env = small_env(8)
     runner = small_runner(env, log_dir=str(tmp_path), save_interval=2)
-    assert runner.train(3)
+    assert runner.learn(3)
     assert runs.list_checkpoints(str(tmp_path)) == [0, 2, 3]
     assert torch.load(runs.checkpoint_path(str(tmp_path), 3), weights_only=True)["iter"] == 3
     resumed = small_runner(env)
@@ -264,7 +264,7 @@ def test_a_run_records_the_commit_it_was_trained_at(tmp_path):
     if not head:
         pytest.skip("not a git checkout")
     runner = small_runner(small_env(8), log_dir=str(tmp_path), save_interval=1)
-    assert runner.train(1)
+    assert runner.learn(1)
     assert runs.trained_commit(str(tmp_path))[:7] == head[:7]
     assert runs.trained_commit(str(tmp_path / "nowhere")) is None
 
@@ -284,7 +284,7 @@ def test_load_policy_gives_the_runners_deterministic_actor(tmp_path):
     runner = small_runner(env, log_dir=str(tmp_path))
     save_yaml(env.task.cfg, tmp_path / runs.ENV_YAML)
     save_yaml(runner.train_cfg, tmp_path / runs.TRAIN_YAML)
-    runner.train(1)
+    runner.learn(1)
     loaded = runs.load_policy(str(tmp_path))
     assert (loaded.task, loaded.iteration, loaded.env_cfg.osc.orc) == (TASK, 1, "111")
     obs = env.get_observations()
@@ -306,7 +306,7 @@ def test_stop_request_drops_the_partial_rollout_and_saves_the_last_iteration(tmp
         return step(actions)
 
     env.step = counting_step
-    assert runner.train(10, stop=stop) is False
+    assert runner.learn(10, stop=stop) is False
     assert runner.current_learning_iteration == 1
     assert runs.list_checkpoints(str(tmp_path)) == [0, 1]
     assert len(calls) == 6

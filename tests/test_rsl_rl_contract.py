@@ -1,35 +1,40 @@
-"""The rsl-rl-lib internals learning/ relies on: fails loudly, naming the piece, when an upgrade changes one.
+"""What learning/ relies on in rsl-rl-lib, checked by behaviour: fails loudly when an upgrade changes it.
 
-learning/runner.py replaces OnPolicyRunner's training loop and logging, so it calls PPO, the models,
-the storage and the Logger directly, and overrides methods whose signatures must stay compatible.
-setup.py pins rsl-rl-lib to the minor version this file was checked against; moving the pin means
-running this file first.
+learning/runner.py runs rsl-rl's own `OnPolicyRunner.learn` and hangs its conventions on the Logger
+callbacks the loop calls (after every env step, after every update, at the start and the end).
+These tests train tiny runs through that loop and check what a user sees: checkpoint names and
+contents, tensorboard steps, a resumed run continuing at the right iteration, a stop that saves,
+the progress line's numbers. setup.py pins rsl-rl-lib to the minor version this file was checked
+against; moving the pin means running this file first.
 """
 
 from __future__ import annotations
 
-import inspect
 import os
 import re
 from importlib.metadata import version
 
 import pytest
-import rsl_rl.utils
-from rsl_rl.algorithms import PPO
+import torch
 from rsl_rl.env import VecEnv
-from rsl_rl.models import MLPModel
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.log_writer import LogWriter
-from rsl_rl.utils.logger import Logger
 from rsl_rl.utils.utils import resolve_callable
 
-from learning.runner import TaskRunner
+from learning import runs
+from learning.runner import StopRequest
+from tests.test_cli import _scalars
+from tests.test_learning import small_env, small_runner
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def params(fn) -> list[str]:
-    return [p for p in inspect.signature(fn).parameters if p != "self"]
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
 
 
 def test_installed_rsl_rl_is_inside_the_pinned_range():
@@ -43,74 +48,64 @@ def test_installed_rsl_rl_is_inside_the_pinned_range():
     )
 
 
-@pytest.mark.parametrize("fn, expected", [
-    (OnPolicyRunner.__init__, ["env", "train_cfg", "log_dir", "device"]),
-    (OnPolicyRunner.learn, ["num_learning_iterations", "init_at_random_ep_len"]),
-    (OnPolicyRunner.save, ["path", "infos"]),
-    (OnPolicyRunner.load, ["path", "load_cfg", "strict", "map_location"]),
-    (OnPolicyRunner.get_inference_policy, ["device"]),
-    (OnPolicyRunner.export_policy_to_jit, ["path", "filename"]),
-    (OnPolicyRunner.export_policy_to_onnx, ["path", "filename", "verbose"]),
-    (Logger.__init__, ["log_dir", "cfg", "env_cfg", "num_envs", "is_distributed", "gpu_world_size",
-                       "gpu_global_rank", "device"]),
-    (Logger.log, ["it", "start_it", "total_it", "collect_time", "learn_time", "loss_dict", "learning_rate",
-                  "action_std", "rnd_weight", "print_minimal", "width", "pad"]),
-    (Logger.process_env_step, ["rewards", "dones", "extras", "intrinsic_rewards"]),
-    (Logger.init_logging_writer, []),
-    (Logger.save_model, ["path", "it"]),
-    (Logger.stop_logging_writer, []),
-    (LogWriter.save_video, ["video", "it"]),
-    (PPO.act, ["obs"]),
-    (PPO.process_env_step, ["obs", "rewards", "dones", "extras"]),
-    (PPO.compute_returns, ["obs"]),
-    (PPO.update, []),
-    (PPO.save, []),
-    (PPO.load, ["loaded_dict", "load_cfg", "strict"]),
-    (MLPModel.__init__, ["obs", "obs_groups", "obs_set", "output_dim", "hidden_dims", "activation",
-                         "obs_normalization", "distribution_cfg"]),
-    (MLPModel.as_onnx, ["verbose"]),
-    (rsl_rl.utils.check_nan, ["obs", "rewards", "dones"]),
-])
-def test_called_and_overridden_signatures(fn, expected):
-    got = params(fn)
-    assert got[: len(expected)] == expected, f"rsl-rl's {fn.__qualname__} now takes {got}; learning/ passes {expected}"
+def test_rsl_rl_runs_the_loop_and_the_callbacks_fire_per_step_and_per_iteration(tmp_path, monkeypatch, capsys):
+    loops, steps, iterations = [], [], []
+    original = OnPolicyRunner.learn
+    monkeypatch.setattr(OnPolicyRunner, "learn", lambda self, *a, **k: (loops.append(a), original(self, *a, **k))[1])
+    runner = small_runner(small_env(8), log_dir=str(tmp_path), steps=3, save_interval=2)
+    after_step, after_iteration = runner.logger.after_step, runner.logger.after_iteration
+    runner.logger.after_step = lambda: (steps.append(1), after_step())
+    runner.logger.after_iteration = lambda n: (iterations.append(n), after_iteration(n))
+    assert runner.learn(3, init_at_random_ep_len=True)
+    assert loops == [(3, True)]  # rsl-rl's learn, called once with what we were given
+    assert (len(steps), iterations) == (9, [1, 2, 3])
+    assert runs.list_checkpoints(str(tmp_path)) == [0, 2, 3]
+    assert [torch.load(runs.checkpoint_path(str(tmp_path), n), weights_only=True)["iter"] for n in (0, 2, 3)] == [0, 2, 3]
+    assert _scalars(str(tmp_path), "Loss/value") == [0, 1, 2]  # event steps are iteration indices
+    lines = [line for line in capsys.readouterr().out.splitlines() if re.search(r"\bit \d/3\b", line)]
+    assert [re.search(r"\bit (\d)/3", line).group(1) for line in lines] == ["1", "2", "3"]
+    assert runner.logger.writer is None  # closed at the end
 
 
-def test_our_overrides_accept_what_rsl_rl_passes():
-    for name in ("learn", "save", "load"):
-        ours, theirs = params(getattr(TaskRunner, name)), params(getattr(OnPolicyRunner, name))
-        assert ours[: len(theirs)] == theirs, f"TaskRunner.{name}{ours} no longer matches OnPolicyRunner.{name}{theirs}"
+def test_a_resumed_runner_continues_at_the_checkpoints_iteration(tmp_path):
+    first = tmp_path / "first"
+    runner = small_runner(small_env(8), log_dir=str(first), steps=2)
+    runner.learn(2)
+    resumed = small_runner(small_env(8), log_dir=str(tmp_path / "second"), steps=2)
+    resumed.load(runs.checkpoint_path(str(first), 2))
+    assert resumed.learn(2)
+    assert runs.list_checkpoints(str(tmp_path / "second")) == [4]
+    assert _scalars(str(tmp_path / "second"), "Loss/value") == [2, 3]
+    assert resumed.current_learning_iteration == 4
+
+
+def test_a_stop_after_an_update_saves_that_iteration_and_closes_the_writer(tmp_path):
+    runner = small_runner(small_env(8), log_dir=str(tmp_path), steps=2)
+    stop = StopRequest()
+    after_iteration = runner.logger.after_iteration
+
+    def stop_after_two(n):
+        stop.requested = n == 2
+        after_iteration(n)
+
+    runner.logger.after_iteration = stop_after_two
+    assert runner.learn(50, stop=stop) is False
+    assert runs.list_checkpoints(str(tmp_path)) == [0, 2]
+    assert runner.current_learning_iteration == 2 and runner.alg.storage.step == 0
+    assert runner.logger.writer is None
+
+
+def test_the_progress_numbers_come_from_rsl_rls_episode_buffers(tmp_path):
+    runner = small_runner(small_env(8, episode_length_s=0.1), log_dir=str(tmp_path), steps=12)
+    runner.learn(1, init_at_random_ep_len=False)
+    logger = runner.logger
+    assert len(logger.lenbuffer) >= 8 and logger.last_reward is not None  # every robot's 10-step episode ended
+    assert logger.last_tracking_error is not None  # the task's Episode/tracking_error reached ep_extras
 
 
 def test_vec_env_contract_is_what_the_adapter_implements():
     abstract = set(getattr(VecEnv, "__abstractmethods__", set()))
     assert abstract <= {"get_observations", "step", "reset"}, f"VecEnv now also requires {abstract}"
-
-
-def test_runner_attributes_and_ppo_behaviour(tmp_path):
-    """Build a small runner and touch every attribute and return value the loop uses."""
-    from tests.test_learning import small_env, small_runner
-
-    env = small_env(num_envs=8)
-    runner = small_runner(env, steps=2)
-    for attr in ("alg", "cfg", "env", "device", "is_distributed", "gpu_world_size", "gpu_global_rank",
-                 "current_learning_iteration"):
-        assert hasattr(runner, attr), f"OnPolicyRunner no longer sets self.{attr}"
-    alg = runner.alg
-    for attr in ("storage", "learning_rate", "actor", "critic"):
-        assert hasattr(alg, attr), f"PPO no longer has .{attr}"
-    assert isinstance(alg.actor.obs_dim, int) and isinstance(alg.critic.obs_dim, int)
-    for method in ("train_mode", "eval_mode", "broadcast_parameters", "get_policy"):
-        assert callable(getattr(alg, method, None)), f"PPO no longer has .{method}()"
-    assert callable(getattr(alg.storage, "clear", None)), "RolloutStorage no longer has .clear()"
-    assert callable(getattr(alg.get_policy(), "as_jit", None))
-    assert "actor_state_dict" in alg.save(), "checkpoints no longer hold actor_state_dict (learning/runs.py reads it)"
-    logger = runner.logger
-    for attr in ("writer", "ep_extras", "rewbuffer", "lenbuffer", "tot_time", "disable_logs", "git_status_repos"):
-        assert hasattr(logger, attr), f"rsl-rl's Logger no longer has .{attr}"
-    assert runner.train(1, init_at_random_ep_len=False)
-    assert runner.current_learning_iteration == 1
-    assert alg.get_policy().output_std.shape[-1] == env.num_actions  # the progress line logs it
 
 
 def test_logger_names_rsl_rl_resolves():
