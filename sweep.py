@@ -28,11 +28,10 @@ import time  # noqa: E402
 
 import yaml  # noqa: E402
 
-import train  # noqa: E402
 from gym_envs.config import ConfigError, apply_overrides, to_dict  # noqa: E402
 from gym_envs.files import atomic_write  # noqa: E402
 from gym_envs.orc import PAPER_CONFIGURATIONS  # noqa: E402
-from learning import cli, runs  # noqa: E402
+from learning import cli, launch, runs  # noqa: E402
 from learning.runner import StopRequest  # noqa: E402
 
 MANIFEST = "manifest.csv"
@@ -56,17 +55,13 @@ def build_parser() -> cli.Parser:
     return parser
 
 
-def train_args(args, orc: str, seed: int) -> list[str]:
-    """The train.py command line of one run of the sweep."""
-    argv = ["--task", "mini_cheetah_osc", "--orc", orc, "--seed", str(seed), "--log_root", args.out,
-            "--experiment_name", f"ORC_{orc}", "--run_name", f"seed{seed}"]
-    for flag in ("max_iterations", "num_envs", "profile", "num_threads", "device", "sim"):
-        value = getattr(args, flag)
-        if value is not None:
-            argv += [f"--{flag}", str(value)]
-    for override in args.overrides:
-        argv += ["--set", override]
-    return argv
+def run_request(args, orc: str, seed: int) -> launch.RunRequest:
+    """What one run of the sweep asks for, as train.py's options would."""
+    return launch.RunRequest(
+        task="mini_cheetah_osc", orc=orc, seed=seed, log_root=args.out, experiment_name=f"ORC_{orc}",
+        run_name=f"seed{seed}", overrides=list(args.overrides),
+        **{flag: getattr(args, flag) for flag in ("max_iterations", "num_envs", "profile", "num_threads", "device", "sim")},
+    )
 
 
 def run_dir_of(out: str, orc: str, seed: int) -> str:
@@ -76,28 +71,25 @@ def run_dir_of(out: str, orc: str, seed: int) -> str:
 def train_one(args, orc: str, seed: int, stop: StopRequest) -> str:
     """Train, resume or skip one run; returns 'finished', 'skipped' or 'stopped' (by `stop`)."""
     run_dir = run_dir_of(args.out, orc, seed)
-    setup = train.prepare(train.build_parser().parse_args(train_args(args, orc, seed)))
-    env_cfg, train_cfg, runner = setup.env_cfg, setup.train_cfg, setup.runner
+    plan = launch.resolve(run_request(args, orc, seed))
+    env_cfg, train_cfg = plan.env_cfg, plan.train_cfg
     done = runs.list_checkpoints(run_dir) if os.path.isdir(run_dir) else []
     if done:
         _check_same_configs(run_dir, env_cfg, train_cfg)
         if max(done) >= train_cfg.max_iterations:
             return "skipped"  # read only: a finished run is left exactly as it is
-    os.makedirs(run_dir, exist_ok=True)
-    # Held while the run is written, so that train.py --resume of it is refused (the sweep's own lock on --out
-    # keeps other sweeps out).
-    with runs.FolderLock(run_dir, "resume it with this sweep when that process has ended, or choose another --out"):
+        plan.resume_from, plan.trained_env_cfg = runs.checkpoint_path(run_dir, max(done)), env_cfg
+    # The lock is held while the run is written, so that train.py --resume of it is refused (the sweep's own lock
+    # on --out keeps other sweeps out).
+    runner, _, lock = launch.start_run(plan, run_dir, progress_prefix=f"[ORC_{orc} seed{seed}] ",
+                                       lock_fix="resume it with this sweep when that process has ended, or choose "
+                                                "another --out")
+    with lock:
         status = load_yaml_dict(os.path.join(run_dir, STATUS))
-        if done:
-            runner.load(runs.checkpoint_path(run_dir, max(done)), context=f"ORC {orc} seed {seed}")
-            print(f"resuming {run_dir} from iteration {max(done)}", flush=True)
-        else:
-            runs.save_run_configs(run_dir, env_cfg, train_cfg)
-            print(f"training {run_dir}", flush=True)
-        runner.attach_run_dir(run_dir, progress_prefix=f"[ORC_{orc} seed{seed}] ")
+        print(f"resuming {run_dir} from iteration {max(done)}" if done else f"training {run_dir}", flush=True)
         start = time.perf_counter()
         finished = runner.learn(train_cfg.max_iterations - runner.current_learning_iteration,
-                                  train_cfg.init_at_random_ep_len, stop)
+                                train_cfg.init_at_random_ep_len, stop)
         logger = runner.logger
         status = {
             "orc": orc,
@@ -174,7 +166,7 @@ def _main(args) -> int:
     # Every run's configs are checked before the first folder is made.
     for orc in args.orcs:
         for seed in args.seeds:
-            train.resolve(train.build_parser().parse_args(train_args(args, orc, seed)))
+            launch.resolve(run_request(args, orc, seed))
     os.makedirs(args.out, exist_ok=True)
     with runs.FolderLock(args.out, "wait for that sweep to end (or stop it), or choose another --out"), \
             StopRequest() as stop:

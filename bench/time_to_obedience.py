@@ -26,11 +26,10 @@ import time
 
 import torch
 
-import train
 from analysis import obedience
 from analysis.locomotion import check_locomotion
 from analysis.rollout import PolicyRun
-from learning import runs
+from learning import launch, runs
 from learning.runs import DeterministicActor
 
 MAX_ERROR = 0.15  # [m/s]
@@ -65,16 +64,13 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(args.num_threads)
     log_root = args.log_root or tempfile.mkdtemp(prefix="time_to_obedience_")
-    train_argv = ["--task", "mini_cheetah_osc", "--orc", "111", "--profile", args.profile, "--seed", str(args.seed),
-                  "--num_threads", str(args.num_threads), "--max_iterations", "1000000"]
-    for override in args.overrides:
-        train_argv += ["--set", override]
-    setup = train.prepare(train.build_parser().parse_args(train_argv))
-    runner, env_cfg, train_cfg = setup.runner, setup.env_cfg, setup.train_cfg
-    run_dir = runs.create_run_dir(log_root, "time_to_obedience", f"{args.profile}_seed{args.seed}")
-    lock = runs.FolderLock(run_dir, "it is a new folder; nothing else should write it")  # noqa: F841 (held to the end)
-    runs.save_run_configs(run_dir, env_cfg, train_cfg)
-    runner.attach_run_dir(run_dir, progress_prefix="[time_to_obedience] ")
+    plan = launch.resolve(launch.RunRequest(
+        task="mini_cheetah_osc", orc="111", profile=args.profile, seed=args.seed, num_threads=args.num_threads,
+        max_iterations=1_000_000, log_root=log_root, experiment_name="time_to_obedience",
+        run_name=f"{args.profile}_seed{args.seed}", overrides=args.overrides,
+    ))
+    runner, run_dir, lock = launch.start_run(plan)  # noqa: F841 (the lock is held to the end)
+    env_cfg, train_cfg = plan.env_cfg, plan.train_cfg
     steps_per_iteration = env_cfg.env.num_envs * train_cfg.num_steps_per_env
     print(f"profile {args.profile}: {env_cfg.env.num_envs} envs x {train_cfg.num_steps_per_env} steps, "
           f"{runner.describe()}; run folder {run_dir}", flush=True)

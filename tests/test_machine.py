@@ -8,6 +8,7 @@ import re
 import pytest
 
 import train
+from learning import launch
 from learning.machine import CPU_MIRRORED_STEPS_PER_S, CPU_STEPS_PER_S, choose_defaults, expected_duration
 from learning.runner_config import PROFILES
 
@@ -72,7 +73,7 @@ def test_expected_duration_rests_on_the_measured_cpu_rate():
 
 
 def test_a_run_says_what_it_chose_why_and_how_long_it_takes(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(train, "_cuda_available", lambda: False)
+    monkeypatch.setattr(launch, "_cuda_available", lambda: False)
     code = train.main(["--task", "mini_cheetah_osc", "--log_root", str(tmp_path), "--num_envs", "16",
                        "--num_threads", "1", "--max_iterations", "1", "--set", "train.num_steps_per_env=4"])
     assert code == 0

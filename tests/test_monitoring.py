@@ -14,6 +14,7 @@ import pytest
 from rsl_rl.utils.utils import resolve_callable
 
 import train
+from gym_envs.config import ConfigError
 from learning import video as video_module
 from learning.runner_config import MiniCheetahOscTrainCfg, check_logger_ready, to_rsl_rl_dict
 from learning.video import TrainingVideo
@@ -62,7 +63,7 @@ def test_neptune_credentials_are_checked_up_front(monkeypatch):
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: object() if name == "neptune" else real(name, *a))
     cfg = MiniCheetahOscTrainCfg(logger="neptune")
-    with pytest.raises(train.ConfigError, match="needs NEPTUNE_API_TOKEN and NEPTUNE_USERNAME in the environment"):
+    with pytest.raises(ConfigError, match="needs NEPTUNE_API_TOKEN and NEPTUNE_USERNAME in the environment"):
         check_logger_ready(cfg, environ={})
     check_logger_ready(cfg, environ={"NEPTUNE_API_TOKEN": "t", "NEPTUNE_USERNAME": "u"})
 
