@@ -17,6 +17,7 @@ from gym_envs.legged_robot_config import (
     ObservationsCfg,
     RewardsCfg,
 )
+from gym_envs.train_config import AlgorithmCfg, DistributionCfg, ModelCfg, TrainCfg
 
 PROPRIOCEPTION = ("base_ang_vel", "projected_gravity", "commands", "dof_pos_obs", "dof_vel")
 
@@ -55,6 +56,23 @@ class MiniCheetahCfg(LeggedRobotCfg):
     domain_rand: DomainRandCfg = field(
         default_factory=lambda: DomainRandCfg(randomize_friction=True, randomize_base_mass=True)
     )
+
+
+@dataclass
+class MiniCheetahTrainCfg(TrainCfg):
+    """The parent task's learner (ORCAgym MiniCheetahRunnerCfg, facts §11)."""
+
+    num_steps_per_env: int = 24
+    max_iterations: int = 1000
+    algorithm: AlgorithmCfg = field(
+        default_factory=lambda: AlgorithmCfg(
+            num_learning_epochs=6, num_mini_batches=6, entropy_coef=0.01, lam=0.99, learning_rate=1e-4
+        )
+    )
+    actor: ModelCfg = field(
+        default_factory=lambda: ModelCfg(hidden_dims=(256, 256, 256), distribution_cfg=DistributionCfg())
+    )
+    critic: ModelCfg = field(default_factory=lambda: ModelCfg(hidden_dims=(256, 256, 256)))
 
 
 class MiniCheetah(LeggedRobot):

@@ -1,38 +1,67 @@
-"""Task registry: a name gives a task class and its default config."""
+"""Task registry: one entry per task names its task class, env config, train config and CPU recipe.
+
+    register("my_robot", MyRobot, MyRobotCfg, MyRobotTrainCfg, cpu_profile="cpu_fast")
+
+is all a new task needs for `train.py --task my_robot`, play.py and the analysis to find it.
+"""
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 from gym_envs.config import ConfigError
 from gym_envs.legged_robot import LeggedRobot
 from gym_envs.legged_robot_config import LeggedRobotCfg
-from gym_envs.mini_cheetah import MiniCheetah, MiniCheetahCfg
+from gym_envs.mini_cheetah import MiniCheetah, MiniCheetahCfg, MiniCheetahTrainCfg
 from gym_envs.mini_cheetah_osc import MiniCheetahOsc, MiniCheetahOscCfg
+from gym_envs.train_config import TrainCfg
 
-TASKS: dict[str, tuple[type[LeggedRobot], type[LeggedRobotCfg]]] = {
-    "mini_cheetah": (MiniCheetah, MiniCheetahCfg),
-    "mini_cheetah_osc": (MiniCheetahOsc, MiniCheetahOscCfg),
-}
+
+@dataclass(frozen=True)
+class TaskSpec:
+    task_class: type[LeggedRobot]
+    env_cfg: type[LeggedRobotCfg]
+    train_cfg: type[TrainCfg]
+    cpu_profile: str  # a profile of learning.runner_config.PROFILES: what a CPU runs without --profile
+
+
+TASKS: dict[str, TaskSpec] = {}
+
+
+def register(name: str, task_class: type[LeggedRobot], env_cfg: type[LeggedRobotCfg], train_cfg: type[TrainCfg],
+             cpu_profile: str = "cpu_fast") -> None:
+    TASKS[name] = TaskSpec(task_class, env_cfg, train_cfg, cpu_profile)
+
+
+register("mini_cheetah", MiniCheetah, MiniCheetahCfg, MiniCheetahTrainCfg)
+# The paper's learner settings are TrainCfg's defaults. cpu_fast trains ORC-111 to pronk whatever its
+# oscillators say; cpu_oscillators is the CPU recipe under which it follows them (docs/recipe-study.md).
+register("mini_cheetah_osc", MiniCheetahOsc, MiniCheetahOscCfg, TrainCfg, cpu_profile="cpu_oscillators")
 
 
 class UnknownTaskError(ConfigError):
     pass
 
 
-def task_entry(name: str) -> tuple[type[LeggedRobot], type[LeggedRobotCfg]]:
+def task_entry(name: str) -> TaskSpec:
     if name not in TASKS:
         raise UnknownTaskError(f"unknown task {name!r}; known tasks: {', '.join(sorted(TASKS))}")
     return TASKS[name]
 
 
 def env_cfg_class(name: str) -> type[LeggedRobotCfg]:
-    return task_entry(name)[1]
+    return task_entry(name).env_cfg
+
+
+def train_cfg_class(name: str) -> type[TrainCfg]:
+    return task_entry(name).train_cfg
 
 
 def make_env(name: str, cfg: LeggedRobotCfg | None = None) -> LeggedRobot:
     """Build task `name` from cfg (its defaults when None)."""
-    task_class, cfg_class = task_entry(name)
+    spec = task_entry(name)
+    task_class, cfg_class = spec.task_class, spec.env_cfg
     cfg = cfg_class() if cfg is None else cfg
     if not isinstance(cfg, cfg_class):
         raise ConfigError(f"task {name!r} needs a {cfg_class.__name__}, got a {type(cfg).__name__}")

@@ -77,7 +77,7 @@ class Plan:
 
     task: str
     env_cfg: Any  # the task's env config dataclass
-    train_cfg: Any  # learning.runner_config.TrainCfg
+    train_cfg: Any  # gym_envs.train_config.TrainCfg
     log_root: str
     rank: int
     world: int
@@ -91,7 +91,7 @@ class Plan:
 def resolve(args: RunRequest) -> Plan:
     """The configs of the run args ask for, every value checked; nothing is built or written (under torchrun
     the process joins its group here: a drawn seed is rank 0's)."""
-    from gym_envs import env_cfg_class
+    from gym_envs.registry import env_cfg_class, train_cfg_class
     from gym_envs.orc import parse_training_orc
     from learning import distributed, runs
     from learning.runner_config import (
@@ -99,7 +99,6 @@ def resolve(args: RunRequest) -> Plan:
         check_logger_ready,
         derived_experiment_name,
         profile_overrides,
-        train_cfg_class,
     )
     from learning.machine import choose_defaults, warp_installed
 
@@ -128,7 +127,7 @@ def resolve(args: RunRequest) -> Plan:
             raise ConfigError("--load_run and --checkpoint choose what to resume from; add --resume")
         task = args.task
         env_cfg = env_cfg_class(task)()
-        train_cfg = train_cfg_class(task)()
+        train_cfg = train_cfg_class(task)(task=task)
 
     for item in args.overrides:
         key = item.partition("=")[0].strip()

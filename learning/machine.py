@@ -21,25 +21,26 @@ from dataclasses import dataclass
 CPU_STEPS_PER_S = 22_000
 CPU_MIRRORED_STEPS_PER_S = 14_500
 CPU_PROFILE, GPU_PROFILE = "cpu_fast", "paper"
-# cpu_fast trains ORC-111 to pronk whatever its oscillators say (docs/recipe-study.md).
-CPU_PROFILE_OF_TASK = {"mini_cheetah_osc": "cpu_oscillators"}
 
 
 def cpu_profile(task: str | None) -> str:
-    """The CPU recipe of a task."""
-    return CPU_PROFILE_OF_TASK.get(task, CPU_PROFILE)
+    """The CPU recipe of a task (its registry entry's), cpu_fast when the task is not known (yet)."""
+    from gym_envs.registry import TASKS
+
+    return TASKS[task].cpu_profile if task in TASKS else CPU_PROFILE
 
 
 def cpu_recipes_text() -> str:
     """The CPU recipes as the help texts quote them, read from the profiles, e.g. '1024 robots x 24 steps:
     cpu_oscillators, 600 iterations, for mini_cheetah_osc; cpu_fast, 300 iterations, for other tasks'."""
+    from gym_envs.registry import TASKS
     from learning.runner_config import profile_setting
 
     def size(name: str) -> str:
         return f"{profile_setting(name, 'env.num_envs')} robots x {profile_setting(name, 'train.num_steps_per_env')} steps"
 
     parts = [f"{name}, {profile_setting(name, 'train.max_iterations')} iterations, for {task}"
-             for task, name in CPU_PROFILE_OF_TASK.items()]
+             for task, name in ((task, spec.cpu_profile) for task, spec in TASKS.items()) if name != CPU_PROFILE]
     parts.append(f"{CPU_PROFILE}, {profile_setting(CPU_PROFILE, 'train.max_iterations')} iterations, for other tasks")
     return f"{size(CPU_PROFILE)}: " + "; ".join(parts)
 
@@ -74,7 +75,7 @@ def choose_defaults(device: str | None, profile: str | None, sim: str | None, *,
     if profile is None and not resume:
         profile = GPU_PROFILE if device == "cuda" else cpu_profile(task)
         reasons.append("the paper's settings suit a GPU" if profile == GPU_PROFILE
-                       else f"{profile} is the CPU recipe" + (f" of {task}" if task in CPU_PROFILE_OF_TASK else ""))
+                       else f"{profile} is the CPU recipe" + (f" of {task}" if profile != CPU_PROFILE else ""))
     if sim is None and not resume and device == "cuda":
         sim = "warp" if warp_available else "mujoco"
         reasons.append("MuJoCo Warp is installed" if warp_available

@@ -32,7 +32,8 @@ from rsl_rl.utils.log_writer import LogWriter
 from rsl_rl.utils.logger import Logger
 
 from learning import distributed, runs
-from learning.runner_config import TrainCfg, to_rsl_rl_dict
+from gym_envs.train_config import TrainCfg
+from learning.runner_config import to_rsl_rl_dict
 from learning.vec_env import TaskVecEnv
 
 

@@ -578,7 +578,7 @@ def load_run_configs(run_dir: str) -> tuple[str, Any, Any]:
     """(task, env config, train config) of a run folder, rebuilt from its YAMLs; values outside the rules are
     errors naming the file (they were saved checked, so the file was edited)."""
     from gym_envs.registry import env_cfg_class
-    from learning.runner_config import train_cfg_class
+    from gym_envs.registry import train_cfg_class
 
     train_path = run_file(run_dir, TRAIN_YAML)
     task = run_task(run_dir)

@@ -19,7 +19,7 @@ from analysis.rollout import build_parser
 from gym_envs.config import Check, OneOf, Ordered, Range, to_dict, yaml_text
 from gym_envs.legged_robot import LeggedRobot
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
-from learning.runner_config import MiniCheetahOscTrainCfg, TrainCfg
+from gym_envs.train_config import TrainCfg
 
 ANALYSIS = {"analysis.report": report, "analysis.balanced_legs": balanced_legs,
             "analysis.disturbance": disturbance, "analysis.gait_emergence": gait_emergence,
@@ -230,7 +230,7 @@ def bad_values(key, value, rules) -> list[str]:
 def config_cases(include_train: bool):
     cases = [(k, v) for k, v in leaves(to_dict(MiniCheetahOscCfg()))]
     if include_train:
-        cases += [(f"train.{k}", v) for k, v in leaves(to_dict(MiniCheetahOscTrainCfg()))]
+        cases += [(f"train.{k}", v) for k, v in leaves(to_dict(TrainCfg()))]
     out = []
     for key, value in cases:
         if key in NO_BAD_VALUE or value is None:

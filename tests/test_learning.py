@@ -10,20 +10,13 @@ import pytest
 import torch
 
 from gym_envs import env_cfg_class, make_env
+from gym_envs.mini_cheetah import MiniCheetahTrainCfg
+from gym_envs.registry import TASKS, train_cfg_class
+from gym_envs.train_config import TrainCfg
 from gym_envs.config import ConfigError, load_yaml, save_yaml
 from learning import runs
 from learning.runner import StopRequest, TaskRunner
-from learning.runner_config import (
-    PROFILES,
-    TRAIN_CFGS,
-    MiniCheetahOscTrainCfg,
-    MiniCheetahTrainCfg,
-    apply_split_overrides,
-    profile_overrides,
-    split_overrides,
-    to_rsl_rl_dict,
-    train_cfg_class,
-)
+from learning.runner_config import PROFILES, apply_split_overrides, profile_overrides, split_overrides, to_rsl_rl_dict
 from learning.vec_env import TaskVecEnv
 
 TASK = "mini_cheetah_osc"
@@ -41,7 +34,7 @@ def small_env(num_envs=8, orc="111", task=TASK, **env):
 
 
 def small_runner(env, log_dir=None, steps=4, **train):
-    cfg = MiniCheetahOscTrainCfg()
+    cfg = TrainCfg(task=TASK)
     cfg.num_steps_per_env = steps
     cfg.algorithm.num_mini_batches = 2
     for key, value in train.items():
@@ -61,7 +54,7 @@ def one_torch_thread():
 
 
 def test_osc_train_config_has_the_paper_values_in_rsl_rl_form():
-    alg = TaskRunner(small_env(4), MiniCheetahOscTrainCfg()).alg
+    alg = TaskRunner(small_env(4), TrainCfg()).alg
     assert (alg.num_learning_epochs, alg.num_mini_batches, alg.clip_param) == (4, 8, 0.2)
     assert (alg.gamma, alg.lam, alg.entropy_coef, alg.value_loss_coef) == (0.99, 0.995, 0.02, 1.0)
     assert (alg.learning_rate, alg.schedule, alg.desired_kl, alg.max_grad_norm) == (1e-5, "adaptive", 0.01, 1.0)
@@ -84,13 +77,13 @@ def test_parent_task_train_config_follows_facts_section_11():
     assert (a.learning_rate, a.num_learning_epochs, a.num_mini_batches) == (1e-4, 6, 6)
     assert (a.entropy_coef, a.gamma, a.lam, a.desired_kl, a.clip_param) == (0.01, 0.99, 0.99, 0.01, 0.2)
     assert cfg.actor.hidden_dims == cfg.critic.hidden_dims == (256, 256, 256)
-    assert set(TRAIN_CFGS) == {"mini_cheetah", "mini_cheetah_osc"}
+    assert {"mini_cheetah", "mini_cheetah_osc"} <= set(TASKS) and train_cfg_class("mini_cheetah") is MiniCheetahTrainCfg
     with pytest.raises(ConfigError, match="unknown task 'x'"):
         train_cfg_class("x")
 
 
 def test_rsl_rl_dict_is_fresh_and_complete():
-    cfg = MiniCheetahOscTrainCfg()
+    cfg = TrainCfg()
     d1, d2 = to_rsl_rl_dict(cfg), to_rsl_rl_dict(cfg)
     assert d1 == d2 and d1["actor"] is not d2["actor"]
     assert d1["obs_groups"] == {"actor": ["actor"], "critic": ["critic"]}
@@ -100,21 +93,21 @@ def test_rsl_rl_dict_is_fresh_and_complete():
 
 
 def test_train_config_yaml_round_trip(tmp_path):
-    for cls in TRAIN_CFGS.values():
+    for cls in {spec.train_cfg for spec in TASKS.values()}:
         path = tmp_path / f"{cls.__name__}.yaml"
         save_yaml(cls(), path)
         assert load_yaml(cls, path) == cls()
 
 
 def test_every_profile_applies_to_every_task():
-    for task in TRAIN_CFGS:
+    for task in TASKS:
         for name, profile in PROFILES.items():
             if profile.tasks and task not in profile.tasks:
                 with pytest.raises(ConfigError, match=f"profile '{name}' is for task"):
                     profile_overrides(name, task)
                 continue
             apply_split_overrides(env_cfg_class(task)(), train_cfg_class(task)(), profile_overrides(name, task))
-    env, train = apply_split_overrides(env_cfg_class(TASK)(), MiniCheetahOscTrainCfg(), profile_overrides("cpu_fast"))
+    env, train = apply_split_overrides(env_cfg_class(TASK)(), TrainCfg(), profile_overrides("cpu_fast"))
     assert env.env.num_envs == 1024 and train.num_steps_per_env == 24 and train.algorithm.learning_rate == 1e-3
     assert profile_overrides("paper") == []
     with pytest.raises(ConfigError, match="unknown profile 'nope'"):
@@ -124,13 +117,13 @@ def test_every_profile_applies_to_every_task():
 def test_override_scheme_routes_train_prefix_and_catches_a_missing_prefix():
     assert split_overrides(["train.seed=3", "env.num_envs=2"]) == (["env.num_envs=2"], ["seed=3"])
     env, train = apply_split_overrides(
-        env_cfg_class(TASK)(), MiniCheetahOscTrainCfg(), ["osc.orc=010", "train.algorithm.learning_rate=1e-4"]
+        env_cfg_class(TASK)(), TrainCfg(), ["osc.orc=010", "train.algorithm.learning_rate=1e-4"]
     )
     assert env.osc.orc == "010" and train.algorithm.learning_rate == 1e-4
     with pytest.raises(ConfigError, match="prefix it with 'train.'"):
-        apply_split_overrides(env_cfg_class(TASK)(), MiniCheetahOscTrainCfg(), ["algorithm.gamma=0.9"])
+        apply_split_overrides(env_cfg_class(TASK)(), TrainCfg(), ["algorithm.gamma=0.9"])
     with pytest.raises(ConfigError, match="did you mean 'algorithm.gamma'"):
-        apply_split_overrides(env_cfg_class(TASK)(), MiniCheetahOscTrainCfg(), ["train.algorithm.gamm=0.9"])
+        apply_split_overrides(env_cfg_class(TASK)(), TrainCfg(), ["train.algorithm.gamm=0.9"])
 
 
 # --- VecEnv adapter ---------------------------------------------------------------------------
@@ -164,7 +157,7 @@ def _fake_run(root, experiment, name, task=TASK, orc="111", checkpoints=(0,)):
     if hasattr(env_cfg, "osc"):
         env_cfg.osc.orc = orc
     save_yaml(env_cfg, os.path.join(path, runs.ENV_YAML))
-    save_yaml(train_cfg_class(task)(), os.path.join(path, runs.TRAIN_YAML))
+    save_yaml(train_cfg_class(task)(task=task), os.path.join(path, runs.TRAIN_YAML))
     for it in checkpoints:
         open(runs.checkpoint_path(path, it), "wb").close()
     return path
@@ -237,7 +230,7 @@ def test_a_save_removes_the_temporary_files_of_interrupted_saves(tmp_path):
 def test_a_checkpoint_with_other_hidden_sizes_is_one_line_naming_the_layer(tmp_path):
     path = str(tmp_path / "model_0.pt")
     small_runner(small_env(4)).save(path)
-    narrow = small_runner(small_env(4), actor=dataclasses.replace(MiniCheetahOscTrainCfg().actor, hidden_dims=(64, 32)))
+    narrow = small_runner(small_env(4), actor=dataclasses.replace(TrainCfg().actor, hidden_dims=(64, 32)))
     with pytest.raises(runs.RunError, match=r"actor layer mlp.0.weight is \[256, 53\] there but \[64, 53\] here; "
                                             r"likely cause: other train.actor.hidden_dims \(the checkpoint's: "
                                             r"\[256, 256, 128\], configured: \[64, 32\]\)"):
@@ -310,3 +303,23 @@ def test_stop_request_drops_the_partial_rollout_and_saves_the_last_iteration(tmp
     assert runner.current_learning_iteration == 1
     assert runs.list_checkpoints(str(tmp_path)) == [0, 1]
     assert len(calls) == 6
+
+
+def test_a_task_is_one_registry_entry(tmp_path, monkeypatch):
+    """A newcomer's task: a class, its configs and one register() call; train.py then trains and names it."""
+    import train
+    from gym_envs.mini_cheetah import MiniCheetah, MiniCheetahCfg
+    from gym_envs.registry import register
+
+    class ToyCheetah(MiniCheetah):
+        pass
+
+    monkeypatch.setattr("gym_envs.registry.TASKS", dict(TASKS))
+    register("toy_cheetah", ToyCheetah, MiniCheetahCfg, MiniCheetahTrainCfg)
+    code = train.main(["--task", "toy_cheetah", "--device", "cpu", "--num_envs", "8", "--num_threads", "1",
+                       "--max_iterations", "1", "--set", "train.num_steps_per_env=4", "--log_root", str(tmp_path)])
+    assert code == 0
+    (run,) = [os.path.join(tmp_path, "toy_cheetah", name) for name in os.listdir(tmp_path / "toy_cheetah")]
+    assert runs.list_checkpoints(run) == [0, 1]
+    task, _, train_cfg = runs.load_run_configs(run)
+    assert (task, train_cfg.profile) == ("toy_cheetah", "cpu_fast")  # the registry entry's CPU recipe

@@ -14,7 +14,8 @@ import train
 from gym_envs import mirror
 from gym_envs.config import ConfigError
 from gym_envs.registry import env_cfg_class, make_env
-from learning.runner_config import MiniCheetahOscTrainCfg, to_rsl_rl_dict
+from gym_envs.train_config import TrainCfg
+from learning.runner_config import to_rsl_rl_dict
 from learning.symmetry import mirror_augmentation
 from learning.vec_env import TaskVecEnv
 
@@ -121,7 +122,7 @@ def test_augmentation_appends_the_mirrored_batch():
 
 
 def test_symmetry_reaches_rsl_rl_only_when_switched_on():
-    cfg = MiniCheetahOscTrainCfg()
+    cfg = TrainCfg()
     assert "symmetry_cfg" not in to_rsl_rl_dict(cfg)["algorithm"]
     cfg.algorithm.symmetry_cfg.use_mirror_loss = True
     cfg.algorithm.symmetry_cfg.mirror_loss_coeff = 0.5

@@ -16,7 +16,8 @@ from rsl_rl.utils.utils import resolve_callable
 import train
 from gym_envs.config import ConfigError
 from learning import video as video_module
-from learning.runner_config import MiniCheetahOscTrainCfg, check_logger_ready, to_rsl_rl_dict
+from gym_envs.train_config import TrainCfg
+from learning.runner_config import check_logger_ready, to_rsl_rl_dict
 from learning.video import TrainingVideo
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -31,11 +32,11 @@ def only_run(root):
 
 @pytest.mark.parametrize("name, writer", [("wandb", "WandbLogWriter"), ("neptune", "NeptuneLogWriter")])
 def test_logger_names_resolve_to_rsl_rls_writers(name, writer):
-    cfg = MiniCheetahOscTrainCfg(logger=name, log_project_name="gaits")
+    cfg = TrainCfg(logger=name, log_project_name="gaits")
     entry = to_rsl_rl_dict(cfg)["logger"]
     assert entry == {"class_name": writer, "project_name": "gaits"}
     assert resolve_callable(entry["class_name"]).__module__.startswith("rsl_rl.utils.")
-    assert to_rsl_rl_dict(MiniCheetahOscTrainCfg())["logger"] == "tensorboard"
+    assert to_rsl_rl_dict(TrainCfg())["logger"] == "tensorboard"
 
 
 def _hide_package(monkeypatch, package):
@@ -62,7 +63,7 @@ def test_a_missing_logger_package_is_one_line_before_anything_is_written(argv, p
 def test_neptune_credentials_are_checked_up_front(monkeypatch):
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: object() if name == "neptune" else real(name, *a))
-    cfg = MiniCheetahOscTrainCfg(logger="neptune")
+    cfg = TrainCfg(logger="neptune")
     with pytest.raises(ConfigError, match="needs NEPTUNE_API_TOKEN and NEPTUNE_USERNAME in the environment"):
         check_logger_ready(cfg, environ={})
     check_logger_ready(cfg, environ={"NEPTUNE_API_TOKEN": "t", "NEPTUNE_USERNAME": "u"})

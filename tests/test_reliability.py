@@ -438,8 +438,7 @@ def config_keys_digest() -> str:
     import hashlib
 
     from gym_envs.config import to_dict
-    from gym_envs.registry import TASKS, env_cfg_class
-    from learning.runner_config import train_cfg_class
+    from gym_envs.registry import TASKS, env_cfg_class, train_cfg_class
 
     def keys(data, prefix=""):
         for key, value in data.items():

@@ -21,7 +21,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from gym_envs.config import load_yaml  # noqa: E402
 from gym_envs.orc import PAPER_CONFIGURATIONS  # noqa: E402
 from learning import runs  # noqa: E402
-from learning.runner_config import train_cfg_class  # noqa: E402
+from gym_envs.registry import train_cfg_class  # noqa: E402
 
 PANELS = (
     ("Train/mean_reward", "mean episode return"),
