@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import warnings
+from types import SimpleNamespace
 
 import torch
 from torch import nn
@@ -44,11 +45,6 @@ CONTROLLER_OUTPUTS = {
     "joint_targets": "(1, J) joint position targets [rad] for the PD servos",
     "new_phase": "(1, legs) phases after integrating the last period's foot forces; feed back as `phase`",
 }
-# Actor observation terms the controller builds from its inputs (no term may need a simulator-only quantity).
-_READABLE_TERMS = ("base_ang_vel", "projected_gravity", "commands", "dof_pos_obs", "dof_vel", "dof_pos_target",
-                   "oscillator_obs", "oscillators_vel")
-
-
 def deployment_metadata(task, checkpoint: str = "") -> dict:
     """Everything outside the networks that a robot needs to run the policy, as plain JSON values."""
     cfg, model = task.cfg, task.sim.model
@@ -96,13 +92,23 @@ def deployment_metadata(task, checkpoint: str = "") -> dict:
     return meta
 
 
+def _reads_only(term, view: SimpleNamespace) -> bool:
+    try:
+        term(view)
+    except AttributeError:
+        return False
+    return True
+
+
 class Controller(nn.Module):
     """Raw readings in, joint targets and new phases out: one control tick of the evaluation env, noise off.
 
     The tick first integrates the oscillators over the last control period's substeps (each with its
     own foot force, as in training: `oscillators.integrate_phases`), with the parameters of the
     current command (`oscillators.oscillator_params`, jitter off), then builds the actor
-    observation, runs the policy and turns the action into joint targets.
+    observation with the task's own `_obs_<name>` terms, called on a view of the task made of the
+    readings (`_task_view`), runs the policy and turns the action into joint targets. A term that
+    reads anything else (simulator state a robot does not read) is refused.
     """
 
     def __init__(self, policy: nn.Module, task):
@@ -114,12 +120,8 @@ class Controller(nn.Module):
             raise ConfigError("the controller export integrates each substep's own force; this run sets "
                               "osc.hold_grf=true (export the policy alone, or retrain without it)")
         scales = task.observation_scales("actor")
-        unreadable = [name for name in scales if name not in _READABLE_TERMS]
-        if unreadable:
-            raise ConfigError(f"actor observation terms {', '.join(unreadable)} need simulator state a robot does "
-                              f"not read; the controller supports {', '.join(_READABLE_TERMS)}")
         self.policy = policy
-        self.terms = tuple(scales)
+        self.terms = tuple((name, getattr(type(task), f"_obs_{name}")) for name in scales)
         for name, scale in scales.items():
             self.register_buffer(f"scale_{name}", scale.detach().cpu().clone())
         self.register_buffer("default_joint_pos", task.default_joint_pos.detach().cpu().clone())
@@ -133,9 +135,22 @@ class Controller(nn.Module):
         self.stand_threshold = float(cfg.osc.stand_threshold)
         self.standing_rule = str(cfg.osc.standing_rule)
         self.coupling_enabled = bool(task.orc.coupling)
+        view = self._task_view(*self.example_inputs())
+        unreadable = [name for name, term in self.terms if not _reads_only(term, view)]
+        if unreadable:
+            raise ConfigError(f"actor observation terms {', '.join(unreadable)} need simulator state a robot does "
+                              f"not read; the controller reads only {', '.join(CONTROLLER_INPUTS)}")
 
-    def forward(self, base_ang_vel, projected_gravity, joint_pos, joint_vel, previous_joint_targets, foot_forces,
-                command, phase):
+    def forward(self, *readings):  # CONTROLLER_INPUTS, in order
+        view = self._task_view(*readings)
+        obs = torch.cat([term(view) / getattr(self, f"scale_{name}") for name, term in self.terms], dim=1)
+        actions = torch.clamp(self.policy(obs), -self.clip_actions, self.clip_actions)
+        return self.default_joint_pos + actions * self.action_scale, view.phase
+
+    def _task_view(self, base_ang_vel, projected_gravity, joint_pos, joint_vel, previous_joint_targets, foot_forces,
+                   command, phase) -> SimpleNamespace:
+        """Stands in for the task when its observation terms are called: the state they may read, from the
+        readings (the phases integrated over the last period); any other attribute does not exist."""
         grf = torch.clamp(foot_forces / self.grf_normaliser, 0.0, 1.0)
         omega, coupling, offset = oscillators.oscillator_params(
             command[:, 0], coupling_max=self.coupling_max, stand_threshold=self.stand_threshold,
@@ -143,19 +158,10 @@ class Controller(nn.Module):
             stand_speed=oscillators.standing_speed(command, self.standing_rule),
         )
         new_phase, phase_vel = oscillators.integrate_phases(phase, grf, omega, coupling, offset, self.physics_dt)
-        readings = {
-            "base_ang_vel": base_ang_vel,
-            "projected_gravity": projected_gravity,
-            "commands": command,
-            "dof_pos_obs": joint_pos - self.default_joint_pos,
-            "dof_vel": joint_vel,
-            "dof_pos_target": previous_joint_targets - self.default_joint_pos,
-            "oscillator_obs": torch.cat([torch.cos(new_phase), torch.sin(new_phase)], dim=1),
-            "oscillators_vel": phase_vel,
-        }
-        obs = torch.cat([readings[name] / getattr(self, f"scale_{name}") for name in self.terms], dim=1)
-        actions = torch.clamp(self.policy(obs), -self.clip_actions, self.clip_actions)
-        return self.default_joint_pos + actions * self.action_scale, new_phase
+        return SimpleNamespace(base_ang_vel=base_ang_vel, projected_gravity=projected_gravity, commands=command,
+                         joint_pos=joint_pos, joint_vel=joint_vel, default_joint_pos=self.default_joint_pos,
+                         target_history=(previous_joint_targets - self.default_joint_pos,), phase=new_phase,
+                         phase_vel=phase_vel)
 
     def example_inputs(self) -> tuple[torch.Tensor, ...]:
         j, legs, dev = self.default_joint_pos.numel(), self.num_legs, self.default_joint_pos.device

@@ -99,3 +99,10 @@ def test_controller_export_refuses_what_a_robot_cannot_run(exported, tmp_path):
             export.Controller(policy, session.task)
     finally:
         session.task.cfg.osc.hold_grf = False
+    actor_terms = session.task.cfg.observations.actor
+    session.task.cfg.observations.actor = ["base_lin_vel", *actor_terms]  # the simulator's, not the IMU's
+    try:
+        with pytest.raises(export.ConfigError, match="terms base_lin_vel need simulator state"):
+            export.Controller(policy, session.task)
+    finally:
+        session.task.cfg.observations.actor = actor_terms
