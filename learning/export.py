@@ -186,10 +186,13 @@ def _quiet_export():
         onnx_logger.setLevel(level)
 
 
-def _finish_onnx(path: str, metadata: dict) -> None:
-    """Fold weights the exporter put in a side file back in, and attach the metadata."""
+def _write_onnx(model: nn.Module, inputs: tuple, path: str, input_names: list, output_names: list,
+                metadata: dict) -> None:
+    """Export to ONNX, fold weights the exporter put in a side file back in, and attach the metadata."""
     import onnx
 
+    with _quiet_export(), torch.no_grad():
+        torch.onnx.export(model, inputs, path, opset_version=18, input_names=input_names, output_names=output_names)
     header = onnx.load(path, load_external_data=False)
     side_files = {e.value for t in header.graph.initializer for e in t.external_data if e.key == "location"}
     model = onnx.load(path)
@@ -211,31 +214,29 @@ def read_metadata(path: str) -> dict:
     return json.loads(props[METADATA_KEY])
 
 
-def export_deployment(runner, task, directory: str, checkpoint: str = "") -> list[str]:
+def export_deployment(policy: nn.Module, task, directory: str, checkpoint: str = "") -> list[str]:
     """Write policy.pt, policy.onnx and (oscillator tasks) controller.onnx; returns the paths written.
 
+    policy: the trained actor (rsl-rl MLPModel, normaliser included): `learning.runs.load_policy(...).policy.model`.
     A policy with a NaN or infinite tensor is refused before anything is written: a robot would run it.
     """
     from learning.runs import non_finite_tensor
 
-    bad = non_finite_tensor(runner.alg.get_policy().state_dict())
+    bad = non_finite_tensor(policy.state_dict())
     if bad:
         raise ConfigError(f"not exporting {checkpoint or 'the policy'}: tensor {bad[0]} holds {bad[1]} NaN or infinite "
                           f"values; export a checkpoint whose networks are finite")
     os.makedirs(directory, exist_ok=True)
     metadata = deployment_metadata(task, checkpoint)
-    jit_path, onnx_path = os.path.join(directory, POLICY_JIT), os.path.join(directory, POLICY_ONNX)
+    paths = [os.path.join(directory, name) for name in (POLICY_JIT, POLICY_ONNX, CONTROLLER_ONNX)]
     with _quiet_export():
-        runner.export_policy_to_jit(directory, POLICY_JIT)
-        runner.export_policy_to_onnx(directory, POLICY_ONNX)
-    _finish_onnx(onnx_path, metadata)
-    paths = [jit_path, onnx_path]
-    if getattr(task.cfg, "osc", None) is not None:
-        controller = Controller(runner.alg.get_policy().as_onnx(verbose=False).cpu().eval(), task).eval()
-        controller_path = os.path.join(directory, CONTROLLER_ONNX)
-        with _quiet_export(), torch.no_grad():
-            torch.onnx.export(controller, controller.example_inputs(), controller_path, opset_version=18,
-                              input_names=list(CONTROLLER_INPUTS), output_names=list(CONTROLLER_OUTPUTS))
-        _finish_onnx(controller_path, metadata)
-        paths.append(controller_path)
+        torch.jit.script(policy.as_jit().cpu()).save(paths[0])
+    onnx_policy = policy.as_onnx(verbose=False).cpu().eval()
+    _write_onnx(onnx_policy, onnx_policy.get_dummy_inputs(), paths[1], onnx_policy.input_names,
+                onnx_policy.output_names, metadata)
+    if getattr(task.cfg, "osc", None) is None:
+        return paths[:2]
+    controller = Controller(onnx_policy, task).eval()
+    _write_onnx(controller, controller.example_inputs(), paths[2], list(CONTROLLER_INPUTS), list(CONTROLLER_OUTPUTS),
+                metadata)
     return paths

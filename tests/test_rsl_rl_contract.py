@@ -49,8 +49,6 @@ def test_installed_rsl_rl_is_inside_the_pinned_range():
     (OnPolicyRunner.save, ["path", "infos"]),
     (OnPolicyRunner.load, ["path", "load_cfg", "strict", "map_location"]),
     (OnPolicyRunner.get_inference_policy, ["device"]),
-    (OnPolicyRunner.export_policy_to_jit, ["path", "filename"]),
-    (OnPolicyRunner.export_policy_to_onnx, ["path", "filename", "verbose"]),
     (Logger.__init__, ["log_dir", "cfg", "env_cfg", "num_envs", "is_distributed", "gpu_world_size",
                        "gpu_global_rank", "device"]),
     (Logger.log, ["it", "start_it", "total_it", "collect_time", "learn_time", "loss_dict", "learning_rate",
@@ -68,6 +66,7 @@ def test_installed_rsl_rl_is_inside_the_pinned_range():
     (PPO.load, ["loaded_dict", "load_cfg", "strict"]),
     (MLPModel.__init__, ["obs", "obs_groups", "obs_set", "output_dim", "hidden_dims", "activation",
                          "obs_normalization", "distribution_cfg"]),
+    (MLPModel.as_jit, []),
     (MLPModel.as_onnx, ["verbose"]),
     (rsl_rl.utils.check_nan, ["obs", "rewards", "dones"]),
 ])
