@@ -31,8 +31,8 @@ import numpy as np
 import torch
 
 from gym_envs import oscillators
+from gym_envs.oscillators import TWO_PI
 
-TWO_PI = 2.0 * math.pi
 DT = 0.01  # control step [s]
 CONTACT_THRESHOLD = 0.1  # body weights (protocol §3: the codebase's only contact threshold)
 MIN_SWING_TIME = 0.05  # s the foot must be unloaded before a rise counts as a touchdown

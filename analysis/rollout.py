@@ -45,12 +45,11 @@ from tqdm import tqdm
 
 from gym_envs.config import apply_overrides, to_dict
 from gym_envs.evaluation import evaluation_overrides
-from gym_envs.legged_robot_config import REPO_ROOT
 from gym_envs.registry import make_env
+from learning.runs import POLICY_ROOT as SHIPPED_POLICIES
 
 DEFAULT_TASK = "mini_cheetah_osc"
 DEFAULT_MAX_BATCH = 4096  # robots per MuJoCo batch
-SHIPPED_POLICIES = os.path.join(REPO_ROOT, "resources", "policies")
 
 Policy = Callable[[TensorDict], torch.Tensor]
 

@@ -38,8 +38,7 @@ import yaml
 
 from gym_envs.config import ConfigError, load_yaml
 from gym_envs.files import atomic_write
-
-REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from gym_envs.legged_robot_config import REPO_ROOT
 DEFAULT_LOG_ROOT = os.path.join(REPO_ROOT, "logs")
 POLICY_ROOT = os.path.join(REPO_ROOT, "resources", "policies")
 ENV_YAML, TRAIN_YAML = "env.yaml", "train.yaml"
