@@ -41,7 +41,7 @@ FILE_STEM = "pace_to_trot"
 CYCLE_CMAP = LinearSegmentedColormap.from_list("blue_orange", ["tab:blue", "tab:orange"])
 
 
-def select_run(grf, dt: float = gait.DT, window_s: float = WINDOW_S) -> dict:
+def select_run(grf, dt: float, window_s: float = WINDOW_S) -> dict:
     """Pick the run to plot from GRF (N, T, 4); see the module docstring for the rule."""
     n_window = int(round(window_s / dt))
     grf = np.asarray(grf)[:, :n_window]
