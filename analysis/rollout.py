@@ -161,7 +161,6 @@ class EvalSettings:
     process_noise_std: float = 0.0  # [Hz] per leg and substep; the released eval scripts ran with 0.25
     observation_noise: bool = False  # actor observation noise (the play script kept it on)
     coupling: float | None = None  # moving coupling sigma at evaluation; None: as trained
-    episode_length_s: float = 1.0e6  # no time-outs within any protocol
 
     def describe(self) -> str:
         coupling = "as trained" if self.coupling is None else f"{self.coupling:g}"
@@ -180,7 +179,6 @@ def eval_overrides(settings: EvalSettings, cfg) -> list[str]:
     O and R are kept, so observations and rewards stay those the policy was trained with.
     """
     overrides = evaluation_overrides(cfg, observation_noise=settings.observation_noise) + [
-        f"env.episode_length_s={float(settings.episode_length_s)!r}",
         f"osc.init={settings.phase_init}",
         f"osc.process_noise_std={float(settings.process_noise_std)!r}",
     ]
