@@ -3,7 +3,7 @@
     python play.py                                      # newest run under logs/, newest checkpoint
     python play.py --task mini_cheetah_osc --orc 110 --command 1.0 --coupling off --duration 20
     python play.py --load_run 2025-01-01_12-00-00_seed3 --checkpoint 1000 --video walk.mp4 --headless
-    python play.py --export                              # writes <run>/exported/policy.pt and policy.onnx
+    python play.py --export                              # <run>/exported/: policy.pt, policy.onnx, controller.onnx
     python play.py --shipped --orc 110                   # the shipped ORC 110 policy, whatever runs exist
 
 Which policy. --load_run (a run folder name or path) and --checkpoint (iteration, -1 newest)

@@ -15,8 +15,8 @@ standing with a zero command, as in the released scripts. Oscillator process noi
 evaluation scripts actually ran with 0.25 because their switch-off wrote to a misnamed field.
 
 Recording: sample k of a recorded signal is the state right after control step `record_from + k + 1`
-(logged once per control step, 100 Hz). `terminated[n, k]` is True if robot n ended an episode on
-that step; the recorded state is then the state after its reset.
+(logged once per control step, `Rollout.dt`: the task's, 100 Hz by default). `terminated[n, k]` is
+True if robot n ended an episode on that step; the recorded state is then the state after its reset.
 
 One sample repeated: when the policy cannot tell the robots apart (no phase observations, the task's
 `robots_indistinguishable`) and robots get the same policy, command and push, they are the same
