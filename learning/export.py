@@ -45,6 +45,8 @@ CONTROLLER_OUTPUTS = {
     "joint_targets": "(1, J) joint position targets [rad] for the PD servos",
     "new_phase": "(1, legs) phases after integrating the last period's foot forces; feed back as `phase`",
 }
+
+
 def deployment_metadata(task, checkpoint: str = "") -> dict:
     """Everything outside the networks that a robot needs to run the policy, as plain JSON values."""
     cfg, model = task.cfg, task.sim.model
@@ -92,14 +94,6 @@ def deployment_metadata(task, checkpoint: str = "") -> dict:
     return meta
 
 
-def _reads_only(term, view: SimpleNamespace) -> bool:
-    try:
-        term(view)
-    except AttributeError:
-        return False
-    return True
-
-
 class Controller(nn.Module):
     """Raw readings in, joint targets and new phases out: one control tick of the evaluation env, noise off.
 
@@ -135,8 +129,12 @@ class Controller(nn.Module):
         self.stand_threshold = float(cfg.osc.stand_threshold)
         self.standing_rule = str(cfg.osc.standing_rule)
         self.coupling_enabled = bool(task.orc.coupling)
-        view = self._task_view(*self.example_inputs())
-        unreadable = [name for name, term in self.terms if not _reads_only(term, view)]
+        view, unreadable = self._task_view(*self.example_inputs()), []
+        for name, term in self.terms:
+            try:
+                term(view)
+            except AttributeError:  # the term reads what the readings do not give
+                unreadable.append(name)
         if unreadable:
             raise ConfigError(f"actor observation terms {', '.join(unreadable)} need simulator state a robot does "
                               f"not read; the controller reads only {', '.join(CONTROLLER_INPUTS)}")
@@ -159,9 +157,9 @@ class Controller(nn.Module):
         )
         new_phase, phase_vel = oscillators.integrate_phases(phase, grf, omega, coupling, offset, self.physics_dt)
         return SimpleNamespace(base_ang_vel=base_ang_vel, projected_gravity=projected_gravity, commands=command,
-                         joint_pos=joint_pos, joint_vel=joint_vel, default_joint_pos=self.default_joint_pos,
-                         target_history=(previous_joint_targets - self.default_joint_pos,), phase=new_phase,
-                         phase_vel=phase_vel)
+                               joint_pos=joint_pos, joint_vel=joint_vel, default_joint_pos=self.default_joint_pos,
+                               target_history=(previous_joint_targets - self.default_joint_pos,), phase=new_phase,
+                               phase_vel=phase_vel)
 
     def example_inputs(self) -> tuple[torch.Tensor, ...]:
         j, legs, dev = self.default_joint_pos.numel(), self.num_legs, self.default_joint_pos.device
