@@ -3,7 +3,7 @@
     python play.py                                      # newest run under logs/, newest checkpoint
     python play.py --task mini_cheetah_osc --orc 110 --command 1.0 --coupling off --duration 20
     python play.py --load_run 2025-01-01_12-00-00_seed3 --checkpoint 1000 --video walk.mp4 --headless
-    python play.py --export                              # writes <run>/exported/policy.pt and policy.onnx
+    python play.py --export                              # <run>/exported/: policy.pt, policy.onnx, controller.onnx
     python play.py --shipped --orc 110                   # the shipped ORC 110 policy, whatever runs exist
 
 Which policy. --load_run (a run folder name or path) and --checkpoint (iteration, -1 newest)
@@ -208,7 +208,6 @@ class Session:
         from gym_envs import make_env
         from gym_envs.orc import parse_orc
         from learning import runs
-        from learning.runner import TaskRunner
         from learning.vec_env import TaskVecEnv
 
         self.choice = choice = choice or choose(args)
@@ -217,10 +216,8 @@ class Session:
         if self.orc is not None and args.coupling == "on" and not parse_orc(self.orc).coupling:
             print(f"note: ORC {self.orc} has C=0, so the coupling stays 0; pass --orc with C=1 to couple")
         self.env = TaskVecEnv(make_env(choice.task_name, choice.env_cfg), device=args.device)
-        self.runner = TaskRunner(self.env, choice.train_cfg, log_dir=None, device=args.device)
-        self.runner.load(self.checkpoint, load_cfg={"actor": True}, context=f"task {choice.task_name} as configured",
-                         cause=runs.orc_mismatch_cause(choice.trained_env_cfg, choice.env_cfg))
-        self.policy = self.runner.get_inference_policy(args.device)
+        self.policy = runs.load_policy(choice.run_dir, choice.iteration, args.device, env=self.env,
+                                       cause=runs.orc_mismatch_cause(choice.trained_env_cfg, choice.env_cfg)).policy
 
     @property
     def task(self):
@@ -344,8 +341,8 @@ def _main(args) -> int:
         if args.export:
             from learning.export import export_deployment
 
-            paths = export_deployment(session.runner, session.task, runs.export_dir(choice.run_dir, choice.log_root),
-                                      choice.checkpoint)
+            paths = export_deployment(session.policy.model, session.task,
+                                      runs.export_dir(choice.run_dir, choice.log_root), choice.checkpoint)
             print(f"exported {', '.join(paths)}")
 
         interactive = not args.headless and _HAS_DISPLAY and video is None

@@ -31,9 +31,8 @@ import numpy as np
 import torch
 
 from gym_envs import oscillators
+from gym_envs.oscillators import TWO_PI
 
-TWO_PI = 2.0 * math.pi
-DT = 0.01  # control step [s]
 CONTACT_THRESHOLD = 0.1  # body weights (protocol §3: the codebase's only contact threshold)
 MIN_SWING_TIME = 0.05  # s the foot must be unloaded before a rise counts as a touchdown
 CHECKPOINT_INTERVAL = 5.0  # s
@@ -74,8 +73,8 @@ def circular_mean(angles, axis=0):
 # --- touchdowns -------------------------------------------------------------------------------
 
 
-def touchdowns(grf, threshold=CONTACT_THRESHOLD, dt=DT, min_swing=MIN_SWING_TIME):
-    """Touchdown sample indices per leg (list of 4 int arrays) from a (T, 4) GRF array.
+def touchdowns(grf, dt, threshold=CONTACT_THRESHOLD, min_swing=MIN_SWING_TIME):
+    """Touchdown sample indices per leg (list of 4 int arrays) from a (T, 4) GRF array sampled every dt [s].
 
     A touchdown is a sample t with GRF[t] > threshold after at least min_swing [s] of samples with
     GRF <= threshold (the unloaded stretch may begin with the record). A contact at t = 0 is none.
@@ -172,7 +171,7 @@ class GaitTimeseries(NamedTuple):
 
 def rpd_timeseries(
     signal,
-    dt=DT,
+    dt,
     interval=CHECKPOINT_INTERVAL,
     n_cycles=CYCLES_PER_CHECKPOINT,
     method="contact",
@@ -182,7 +181,8 @@ def rpd_timeseries(
 ):
     """RPD and gait label every `interval` s (checkpoints interval, 2*interval, ... <= T*dt).
 
-    signal: GRF (method='contact') or oscillator phases (method='phase'), shape (T, 4) or (N, T, 4).
+    signal: GRF (method='contact') or oscillator phases (method='phase'), shape (T, 4) or (N, T, 4), sampled
+    every dt [s] (the rollout's control step, `Rollout.dt`).
     """
     x = np.asarray(signal, float)
     batched = x.ndim == 3
@@ -200,7 +200,7 @@ def rpd_timeseries(
 
     rpd = np.full((x.shape[0], n_check, 3), np.nan)
     for n in range(x.shape[0]):
-        td = touchdowns(x[n], threshold, dt, min_swing) if method == "contact" else phase_touchdowns(x[n])
+        td = touchdowns(x[n], dt, threshold, min_swing) if method == "contact" else phase_touchdowns(x[n])
         rpd[n] = window_rpd(footfall_phases(td), last_sample, n_cycles)
     valid = ~np.isnan(rpd).any(axis=-1)
     labels, distance = classify(rpd, max_distance)

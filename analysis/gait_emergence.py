@@ -92,7 +92,7 @@ def collect(policies, quick: bool = False, settings: EvalSettings = EvalSettings
     return out
 
 
-def first_cycles_rpd(grf_runs, dt: float = gait.DT) -> np.ndarray:
+def first_cycles_rpd(grf_runs, dt: float) -> np.ndarray:
     """Contact RPD averaged over each run's first two complete RF cycles: (N, T, 4) -> (N, 3), NaN if none."""
     out = np.full((len(grf_runs), 3), np.nan)
     for n, grf in enumerate(grf_runs):

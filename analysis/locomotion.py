@@ -47,8 +47,8 @@ def check_locomotion(policy, env_cfg, command: float = 1.0, warmup_s: float = 2.
     result = rollout(policy, cfg, steps, command=(command, 0.0, 0.0),
                      record=("grf", "phase", "base_lin_vel", "terminated"), record_from=warmup, progress=False)
     vx = result.data["base_lin_vel"][..., 0]
-    labels = rpd_timeseries(result.data["grf"], dt=dt).labels[:, -1]
-    by_phase = rpd_timeseries(result.data["phase"], dt=dt, method="phase").labels[:, -1]
+    labels = rpd_timeseries(result.data["grf"], dt=result.dt).labels[:, -1]
+    by_phase = rpd_timeseries(result.data["phase"], dt=result.dt, method="phase").labels[:, -1]
     return LocomotionCheck(
         tracking_error=float(np.mean(np.abs(vx.mean(axis=1) - command))),
         mean_velocity=float(vx.mean()),

@@ -30,6 +30,7 @@ from analysis import gait
 from analysis.gait_emergence import EXPERIMENTS, first_cycles_rpd, pick_policies
 from analysis.plotting import COLUMN_WIDTH, LEG_NAMES, paper_style, save_figure
 from analysis.rollout import EvalSettings, Job, cli_main, run_jobs
+from gym_envs.oscillators import TWO_PI
 
 import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
 
@@ -37,11 +38,10 @@ PROTOCOL = {"runs": 500, "duration_s": 10.0}
 QUICK = {"runs": 40, "duration_s": 10.0}
 WINDOW_S = 10.0
 FILE_STEM = "pace_to_trot"
-TWO_PI = 2.0 * math.pi
 CYCLE_CMAP = LinearSegmentedColormap.from_list("blue_orange", ["tab:blue", "tab:orange"])
 
 
-def select_run(grf, dt: float = gait.DT, window_s: float = WINDOW_S) -> dict:
+def select_run(grf, dt: float, window_s: float = WINDOW_S) -> dict:
     """Pick the run to plot from GRF (N, T, 4); see the module docstring for the rule."""
     n_window = int(round(window_s / dt))
     grf = np.asarray(grf)[:, :n_window]

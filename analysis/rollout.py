@@ -15,8 +15,8 @@ standing with a zero command, as in the released scripts. Oscillator process noi
 evaluation scripts actually ran with 0.25 because their switch-off wrote to a misnamed field.
 
 Recording: sample k of a recorded signal is the state right after control step `record_from + k + 1`
-(logged once per control step, 100 Hz). `terminated[n, k]` is True if robot n ended an episode on
-that step; the recorded state is then the state after its reset.
+(logged once per control step, `Rollout.dt`: the task's, 100 Hz by default). `terminated[n, k]` is
+True if robot n ended an episode on that step; the recorded state is then the state after its reset.
 
 One sample repeated: when the policy cannot tell the robots apart (no phase observations, the task's
 `robots_indistinguishable`) and robots get the same policy, command and push, they are the same
@@ -45,12 +45,11 @@ from tqdm import tqdm
 
 from gym_envs.config import apply_overrides, to_dict
 from gym_envs.evaluation import evaluation_overrides
-from gym_envs.legged_robot_config import REPO_ROOT
 from gym_envs.registry import make_env
+from learning.runs import POLICY_ROOT as SHIPPED_POLICIES
 
 DEFAULT_TASK = "mini_cheetah_osc"
 DEFAULT_MAX_BATCH = 4096  # robots per MuJoCo batch
-SHIPPED_POLICIES = os.path.join(REPO_ROOT, "resources", "policies")
 
 Policy = Callable[[TensorDict], torch.Tensor]
 
@@ -162,7 +161,6 @@ class EvalSettings:
     process_noise_std: float = 0.0  # [Hz] per leg and substep; the released eval scripts ran with 0.25
     observation_noise: bool = False  # actor observation noise (the play script kept it on)
     coupling: float | None = None  # moving coupling sigma at evaluation; None: as trained
-    episode_length_s: float = 1.0e6  # no time-outs within any protocol
 
     def describe(self) -> str:
         coupling = "as trained" if self.coupling is None else f"{self.coupling:g}"
@@ -181,7 +179,6 @@ def eval_overrides(settings: EvalSettings, cfg) -> list[str]:
     O and R are kept, so observations and rewards stay those the policy was trained with.
     """
     overrides = evaluation_overrides(cfg, observation_noise=settings.observation_noise) + [
-        f"env.episode_length_s={float(settings.episode_length_s)!r}",
         f"osc.init={settings.phase_init}",
         f"osc.process_noise_std={float(settings.process_noise_std)!r}",
     ]

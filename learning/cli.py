@@ -1,7 +1,7 @@
-"""What every orcgym command line shares: one flag style, values checked as they are parsed, one error path.
+"""What the orcgym command lines share: one flag style, values checked as they are parsed, one error path.
 
 train.py, play.py, sweep.py and the analysis modules build their parsers from `Parser` and the
-`add_*` groups here and run their bodies through `run`, so that:
+`add_*` groups here and run their bodies through `run` (tools/ and bench/ use plain argparse), so that:
   * flags are spelled with underscores (`--num_envs`, `--max_per_config`); the dashed spelling of
     a flag is accepted too (`--max-per-config`);
   * a bad flag value is one line naming the flag, the value and what is allowed, before anything

@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import warnings
+from types import SimpleNamespace
 
 import torch
 from torch import nn
@@ -44,9 +45,6 @@ CONTROLLER_OUTPUTS = {
     "joint_targets": "(1, J) joint position targets [rad] for the PD servos",
     "new_phase": "(1, legs) phases after integrating the last period's foot forces; feed back as `phase`",
 }
-# Actor observation terms the controller builds from its inputs (no term may need a simulator-only quantity).
-_READABLE_TERMS = ("base_ang_vel", "projected_gravity", "commands", "dof_pos_obs", "dof_vel", "dof_pos_target",
-                   "oscillator_obs", "oscillators_vel")
 
 
 def deployment_metadata(task, checkpoint: str = "") -> dict:
@@ -102,7 +100,9 @@ class Controller(nn.Module):
     The tick first integrates the oscillators over the last control period's substeps (each with its
     own foot force, as in training: `oscillators.integrate_phases`), with the parameters of the
     current command (`oscillators.oscillator_params`, jitter off), then builds the actor
-    observation, runs the policy and turns the action into joint targets.
+    observation with the task's own `_obs_<name>` terms, called on a view of the task made of the
+    readings (`_task_view`), runs the policy and turns the action into joint targets. A term that
+    reads anything else (simulator state a robot does not read) is refused.
     """
 
     def __init__(self, policy: nn.Module, task):
@@ -114,12 +114,8 @@ class Controller(nn.Module):
             raise ConfigError("the controller export integrates each substep's own force; this run sets "
                               "osc.hold_grf=true (export the policy alone, or retrain without it)")
         scales = task.observation_scales("actor")
-        unreadable = [name for name in scales if name not in _READABLE_TERMS]
-        if unreadable:
-            raise ConfigError(f"actor observation terms {', '.join(unreadable)} need simulator state a robot does "
-                              f"not read; the controller supports {', '.join(_READABLE_TERMS)}")
         self.policy = policy
-        self.terms = tuple(scales)
+        self.terms = tuple((name, getattr(type(task), f"_obs_{name}")) for name in scales)
         for name, scale in scales.items():
             self.register_buffer(f"scale_{name}", scale.detach().cpu().clone())
         self.register_buffer("default_joint_pos", task.default_joint_pos.detach().cpu().clone())
@@ -133,9 +129,26 @@ class Controller(nn.Module):
         self.stand_threshold = float(cfg.osc.stand_threshold)
         self.standing_rule = str(cfg.osc.standing_rule)
         self.coupling_enabled = bool(task.orc.coupling)
+        view, unreadable = self._task_view(*self.example_inputs()), []
+        for name, term in self.terms:
+            try:
+                term(view)
+            except AttributeError:  # the term reads what the readings do not give
+                unreadable.append(name)
+        if unreadable:
+            raise ConfigError(f"actor observation terms {', '.join(unreadable)} need simulator state a robot does "
+                              f"not read; the controller reads only {', '.join(CONTROLLER_INPUTS)}")
 
-    def forward(self, base_ang_vel, projected_gravity, joint_pos, joint_vel, previous_joint_targets, foot_forces,
-                command, phase):
+    def forward(self, *readings):  # CONTROLLER_INPUTS, in order
+        view = self._task_view(*readings)
+        obs = torch.cat([term(view) / getattr(self, f"scale_{name}") for name, term in self.terms], dim=1)
+        actions = torch.clamp(self.policy(obs), -self.clip_actions, self.clip_actions)
+        return self.default_joint_pos + actions * self.action_scale, view.phase
+
+    def _task_view(self, base_ang_vel, projected_gravity, joint_pos, joint_vel, previous_joint_targets, foot_forces,
+                   command, phase) -> SimpleNamespace:
+        """Stands in for the task when its observation terms are called: the state they may read, from the
+        readings (the phases integrated over the last period); any other attribute does not exist."""
         grf = torch.clamp(foot_forces / self.grf_normaliser, 0.0, 1.0)
         omega, coupling, offset = oscillators.oscillator_params(
             command[:, 0], coupling_max=self.coupling_max, stand_threshold=self.stand_threshold,
@@ -143,19 +156,10 @@ class Controller(nn.Module):
             stand_speed=oscillators.standing_speed(command, self.standing_rule),
         )
         new_phase, phase_vel = oscillators.integrate_phases(phase, grf, omega, coupling, offset, self.physics_dt)
-        readings = {
-            "base_ang_vel": base_ang_vel,
-            "projected_gravity": projected_gravity,
-            "commands": command,
-            "dof_pos_obs": joint_pos - self.default_joint_pos,
-            "dof_vel": joint_vel,
-            "dof_pos_target": previous_joint_targets - self.default_joint_pos,
-            "oscillator_obs": torch.cat([torch.cos(new_phase), torch.sin(new_phase)], dim=1),
-            "oscillators_vel": phase_vel,
-        }
-        obs = torch.cat([readings[name] / getattr(self, f"scale_{name}") for name in self.terms], dim=1)
-        actions = torch.clamp(self.policy(obs), -self.clip_actions, self.clip_actions)
-        return self.default_joint_pos + actions * self.action_scale, new_phase
+        return SimpleNamespace(base_ang_vel=base_ang_vel, projected_gravity=projected_gravity, commands=command,
+                               joint_pos=joint_pos, joint_vel=joint_vel, default_joint_pos=self.default_joint_pos,
+                               target_history=(previous_joint_targets - self.default_joint_pos,), phase=new_phase,
+                               phase_vel=phase_vel)
 
     def example_inputs(self) -> tuple[torch.Tensor, ...]:
         j, legs, dev = self.default_joint_pos.numel(), self.num_legs, self.default_joint_pos.device
@@ -180,10 +184,13 @@ def _quiet_export():
         onnx_logger.setLevel(level)
 
 
-def _finish_onnx(path: str, metadata: dict) -> None:
-    """Fold weights the exporter put in a side file back in, and attach the metadata."""
+def _write_onnx(model: nn.Module, inputs: tuple, path: str, input_names: list, output_names: list,
+                metadata: dict) -> None:
+    """Export to ONNX, fold weights the exporter put in a side file back in, and attach the metadata."""
     import onnx
 
+    with _quiet_export(), torch.no_grad():
+        torch.onnx.export(model, inputs, path, opset_version=18, input_names=input_names, output_names=output_names)
     header = onnx.load(path, load_external_data=False)
     side_files = {e.value for t in header.graph.initializer for e in t.external_data if e.key == "location"}
     model = onnx.load(path)
@@ -205,31 +212,29 @@ def read_metadata(path: str) -> dict:
     return json.loads(props[METADATA_KEY])
 
 
-def export_deployment(runner, task, directory: str, checkpoint: str = "") -> list[str]:
+def export_deployment(policy: nn.Module, task, directory: str, checkpoint: str = "") -> list[str]:
     """Write policy.pt, policy.onnx and (oscillator tasks) controller.onnx; returns the paths written.
 
+    policy: the trained actor (rsl-rl MLPModel, normaliser included): `learning.runs.load_policy(...).policy.model`.
     A policy with a NaN or infinite tensor is refused before anything is written: a robot would run it.
     """
     from learning.runs import non_finite_tensor
 
-    bad = non_finite_tensor(runner.alg.get_policy().state_dict())
+    bad = non_finite_tensor(policy.state_dict())
     if bad:
         raise ConfigError(f"not exporting {checkpoint or 'the policy'}: tensor {bad[0]} holds {bad[1]} NaN or infinite "
                           f"values; export a checkpoint whose networks are finite")
     os.makedirs(directory, exist_ok=True)
     metadata = deployment_metadata(task, checkpoint)
-    jit_path, onnx_path = os.path.join(directory, POLICY_JIT), os.path.join(directory, POLICY_ONNX)
+    paths = [os.path.join(directory, name) for name in (POLICY_JIT, POLICY_ONNX, CONTROLLER_ONNX)]
     with _quiet_export():
-        runner.export_policy_to_jit(directory, POLICY_JIT)
-        runner.export_policy_to_onnx(directory, POLICY_ONNX)
-    _finish_onnx(onnx_path, metadata)
-    paths = [jit_path, onnx_path]
-    if getattr(task.cfg, "osc", None) is not None:
-        controller = Controller(runner.alg.get_policy().as_onnx(verbose=False).cpu().eval(), task).eval()
-        controller_path = os.path.join(directory, CONTROLLER_ONNX)
-        with _quiet_export(), torch.no_grad():
-            torch.onnx.export(controller, controller.example_inputs(), controller_path, opset_version=18,
-                              input_names=list(CONTROLLER_INPUTS), output_names=list(CONTROLLER_OUTPUTS))
-        _finish_onnx(controller_path, metadata)
-        paths.append(controller_path)
+        torch.jit.script(policy.as_jit().cpu()).save(paths[0])
+    onnx_policy = policy.as_onnx(verbose=False).cpu().eval()
+    _write_onnx(onnx_policy, onnx_policy.get_dummy_inputs(), paths[1], onnx_policy.input_names,
+                onnx_policy.output_names, metadata)
+    if getattr(task.cfg, "osc", None) is None:
+        return paths[:2]
+    controller = Controller(onnx_policy, task).eval()
+    _write_onnx(controller, controller.example_inputs(), paths[2], list(CONTROLLER_INPUTS), list(CONTROLLER_OUTPUTS),
+                metadata)
     return paths

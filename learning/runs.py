@@ -38,8 +38,7 @@ import yaml
 
 from gym_envs.config import ConfigError, load_yaml
 from gym_envs.files import atomic_write
-
-REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from gym_envs.legged_robot_config import REPO_ROOT
 DEFAULT_LOG_ROOT = os.path.join(REPO_ROOT, "logs")
 POLICY_ROOT = os.path.join(REPO_ROOT, "resources", "policies")
 ENV_YAML, TRAIN_YAML = "env.yaml", "train.yaml"
@@ -617,11 +616,13 @@ class LoadedPolicy:
     policy: DeterministicActor
 
 
-def load_policy(run_dir: str, checkpoint: int = -1, device: str | torch.device = "cpu") -> LoadedPolicy:
+def load_policy(run_dir: str, checkpoint: int = -1, device: str | torch.device = "cpu", env: Any = None,
+                cause: str = "") -> LoadedPolicy:
     """A run's configs and its deterministic actor (normaliser included), without building an env.
 
     The actor's input size comes from the checkpoint; the env built from `env_cfg` gives the same
-    size as long as the ORC O-bit and the observation terms are kept.
+    size as long as the ORC O-bit and the observation terms are kept. Given the env it will run in
+    (a task or TaskVecEnv), a checkpoint whose sizes do not fit it is a RunError naming `cause`.
     """
     from rsl_rl.models import MLPModel
     from tensordict import TensorDict
@@ -631,6 +632,10 @@ def load_policy(run_dir: str, checkpoint: int = -1, device: str | torch.device =
     task, env_cfg, train_cfg = load_run_configs(run_dir)
     path = find_checkpoint(run_dir, checkpoint)
     data = load_checkpoint(path, map_location=device)
+    if env is not None:
+        obs = env.get_observations()
+        check_checkpoint_fits(data, path, obs["actor"].shape[1], obs["critic"].shape[1], env.num_actions,
+                              f"task {task} as configured", cause)
     in_dim, num_actions = model_io_dims(data["actor_state_dict"])
     rsl = to_rsl_rl_dict(train_cfg)
     groups = rsl["obs_groups"]["actor"]

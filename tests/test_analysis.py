@@ -24,6 +24,7 @@ from analysis.rollout import (
 from gym_envs import env_cfg_class, make_env
 
 PI = math.pi
+DT = 0.01  # control step [s] of the synthetic records
 
 
 # --- disturbance scoring (Table I) ----------------------------------------------------------------
@@ -150,7 +151,7 @@ def _gait_grf(rpd, period=40, steps=400, duty=0.5):
 
 def test_first_cycles_rpd_recovers_the_starting_gait():
     grf = np.stack([_gait_grf([PI, 0.0, PI]), _gait_grf([PI, PI, 0.0]), np.zeros((400, 4))])
-    rpd = gait_emergence.first_cycles_rpd(grf)
+    rpd = gait_emergence.first_cycles_rpd(grf, DT)
     np.testing.assert_allclose(rpd[0], [PI, 0.0, PI], atol=1e-9)
     np.testing.assert_allclose(rpd[1], [PI, PI, 0.0], atol=1e-9)
     assert np.isnan(rpd[2]).all()  # never touched down
@@ -175,10 +176,10 @@ def test_pace_to_trot_selection_prefers_a_real_pace_to_trot_run():
     steps = 1000
     pace, trot = _gait_grf([PI, 0.0, PI], steps=steps), _gait_grf([PI, PI, 0.0], steps=steps)
     switching = np.concatenate([pace[:300], trot[300:]])  # pace first, trot long before 10 s
-    choice = pace_to_trot.select_run(np.stack([trot, switching, pace]))
+    choice = pace_to_trot.select_run(np.stack([trot, switching, pace]), DT)
     assert choice["index"] == 1 and choice["candidates"] == 1
     assert (choice["start_label"], choice["end_label"]) == ("pace", "trot")
-    fallback = pace_to_trot.select_run(np.stack([trot, pace]))
+    fallback = pace_to_trot.select_run(np.stack([trot, pace]), DT)
     assert fallback["rule"].startswith("fallback") and fallback["candidates"] == 0
 
 

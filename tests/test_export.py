@@ -24,7 +24,7 @@ def shipped_session(tmp_path, *extra):
 def exported(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("export")
     session = shipped_session(tmp)
-    paths = export.export_deployment(session.runner, session.task, str(tmp / "exported"), session.checkpoint)
+    paths = export.export_deployment(session.policy.model, session.task, str(tmp / "exported"), session.checkpoint)
     return tmp, session, paths
 
 
@@ -35,7 +35,7 @@ def test_export_writes_policy_and_controller_with_metadata(exported):
         meta = export.read_metadata(path)
         terms = [t["term"] for t in meta["observation"]]
         assert terms == list(session.task.cfg.observations.actor)
-        assert sum(t["width"] for t in meta["observation"]) == session.runner.obs_dims[0]
+        assert sum(t["width"] for t in meta["observation"]) == session.policy.model.obs_dim
         commands = next(t for t in meta["observation"] if t["term"] == "commands")
         assert commands["scale"] == [3.0, 1.0, 3.0]
         assert meta["action_scale"] == pytest.approx([0.2, 0.3, 0.3] * 4)
@@ -92,10 +92,17 @@ def test_exported_controller_drives_the_simulator_like_play(exported, tmp_path):
 
 def test_controller_export_refuses_what_a_robot_cannot_run(exported, tmp_path):
     _, session, _ = exported
-    policy = session.runner.alg.get_policy().as_onnx(verbose=False)
+    policy = session.policy.model.as_onnx(verbose=False)
     session.task.cfg.osc.hold_grf = True
     try:
         with pytest.raises(export.ConfigError, match="osc.hold_grf=true"):
             export.Controller(policy, session.task)
     finally:
         session.task.cfg.osc.hold_grf = False
+    actor_terms = session.task.cfg.observations.actor
+    session.task.cfg.observations.actor = ["base_lin_vel", *actor_terms]  # the simulator's, not the IMU's
+    try:
+        with pytest.raises(export.ConfigError, match="terms base_lin_vel need simulator state"):
+            export.Controller(policy, session.task)
+    finally:
+        session.task.cfg.observations.actor = actor_terms

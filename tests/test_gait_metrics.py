@@ -24,7 +24,8 @@ from analysis.gait import (
 )
 
 PI = math.pi
-PERIOD = 40  # steps: 2.5 Hz at dt = 0.01 s
+DT = 0.01  # control step [s] of the synthetic records
+PERIOD = 40  # steps: 2.5 Hz at DT
 T = 4000  # 40 s
 
 
@@ -44,7 +45,7 @@ def grf_from_touchdowns(td_lists, n_steps, stance=20, load=0.5):
     return grf
 
 
-def footfalls(rpd, freq=2.5, duty=0.5, n_steps=T, dt=0.01, jitter=0, start=0.13, seed=0):
+def footfalls(rpd, freq=2.5, duty=0.5, n_steps=T, dt=DT, jitter=0, start=0.13, seed=0):
     """Ideal touchdown samples per leg: RF lands at start + k / freq, leg j lags it by rpd_j / (2 pi)
     of a cycle; each touchdown is moved by up to +-jitter samples. Returns (touchdowns, stance samples)."""
     rng = np.random.default_rng(seed)
@@ -149,13 +150,13 @@ def test_touchdowns_need_a_swing_before_them():
     grf[54:70, 1] = 0.4  # after 0.02 s unloaded (a lift-off bounce): none
     grf[0:20, 2] = 0.4  # contact at t = 0 is not a touchdown
     grf[40:60, 3] = 0.1  # exactly at threshold: not contact
-    td = touchdowns(grf)
+    td = touchdowns(grf, DT)
     assert td[0].tolist() == [10, 36]
     assert td[1].tolist() == [50]
     assert td[2].tolist() == []
     assert td[3].tolist() == []
-    assert touchdowns(grf, min_swing=0.0)[1].tolist() == [50, 54]
-    assert touchdowns(grf, min_swing=0.1)[0].tolist() == [10]
+    assert touchdowns(grf, DT, min_swing=0.0)[1].tolist() == [50, 54]
+    assert touchdowns(grf, DT, min_swing=0.1)[0].tolist() == [10]
 
 
 GAIT_CASES = [(g, f, d) for g in ("trot", "pace", "bound", "pronk") for f, d in ((1.5, 0.6), (2.5, 0.5), (3.5, 0.35))]
@@ -164,11 +165,11 @@ GAIT_CASES = [(g, f, d) for g in ("trot", "pace", "bound", "pronk") for f, d in 
 @pytest.mark.parametrize("gait,freq,duty", GAIT_CASES)
 def test_ideal_gaits_at_several_frequencies_and_duty_factors(gait, freq, duty):
     grf = gait_grf(IDEAL_GAITS[gait], freq=freq, duty=duty)
-    td = touchdowns(grf)
+    td = touchdowns(grf, DT)
     expected = footfalls(IDEAL_GAITS[gait], freq=freq)[0]
     for leg in range(4):
         assert np.array_equal(td[leg], expected[leg][expected[leg] > 0])
-    ts = rpd_timeseries(grf)
+    ts = rpd_timeseries(grf, DT)
     assert ts.times.tolist() == [5.0 * k for k in range(1, 9)]
     assert ts.valid.all()
     assert (ts.labels == gait).all()
@@ -179,11 +180,11 @@ def test_ideal_gaits_at_several_frequencies_and_duty_factors(gait, freq, duty):
 def test_lift_off_bounce_is_no_touchdown(gait):
     clean, bouncy = gait_grf(IDEAL_GAITS[gait]), gait_grf(IDEAL_GAITS[gait], bounce=True)
     assert not np.array_equal(clean, bouncy)
-    for a, b in zip(touchdowns(clean), touchdowns(bouncy)):
+    for a, b in zip(touchdowns(clean, DT), touchdowns(bouncy, DT)):
         assert np.array_equal(a, b)  # 100 per leg in 40 s, not 200
-    assert (rpd_timeseries(bouncy).labels == gait).all()
+    assert (rpd_timeseries(bouncy, DT).labels == gait).all()
     # The old rule (a 0.1 s minimum interval instead of a swing) takes each bounce for a touchdown.
-    assert len(touchdowns(bouncy, min_swing=0.0)[0]) == 2 * len(touchdowns(clean)[0])
+    assert len(touchdowns(bouncy, DT, min_swing=0.0)[0]) == 2 * len(touchdowns(clean, DT)[0])
 
 
 @pytest.mark.parametrize("gait", ["trot", "pace", "bound", "pronk"])
@@ -196,7 +197,7 @@ def test_legs_landing_alternately_before_and_after_rf(gait):
         if r == 0.0:
             tds[j + 1] = rf - (np.arange(rf.size) % 2 == 0)
     grf = grf_from_touchdowns(tds, T, stance)
-    ts = rpd_timeseries(grf)
+    ts = rpd_timeseries(grf, DT)
     assert ts.valid.all()
     assert (ts.labels == gait).all()
 
@@ -204,21 +205,21 @@ def test_legs_landing_alternately_before_and_after_rf(gait):
 @pytest.mark.parametrize("gait", ["trot", "pace", "bound", "pronk"])
 def test_touchdown_jitter_of_two_samples(gait):
     for seed in range(3):
-        ts = rpd_timeseries(gait_grf(IDEAL_GAITS[gait], jitter=2, seed=seed))
+        ts = rpd_timeseries(gait_grf(IDEAL_GAITS[gait], jitter=2, seed=seed), DT)
         assert ts.valid.all()
         assert (ts.labels == gait).all()
 
 
 @pytest.mark.parametrize("gait", ["trot", "pace", "bound", "pronk"])
 def test_time_shift_leaves_labels_unchanged(gait):
-    reference = rpd_timeseries(gait_grf(IDEAL_GAITS[gait])).labels
+    reference = rpd_timeseries(gait_grf(IDEAL_GAITS[gait]), DT).labels
     for start in (0.0, 0.07, 0.19, 0.33):
-        assert np.array_equal(rpd_timeseries(gait_grf(IDEAL_GAITS[gait], start=start)).labels, reference)
+        assert np.array_equal(rpd_timeseries(gait_grf(IDEAL_GAITS[gait], start=start), DT).labels, reference)
 
 
 def test_generic_rpd_value():
     rpd = (PI / 2, 3 * PI / 2, PI / 4)  # lags of 10, 30, 5 steps
-    ts = rpd_timeseries(square_wave(rpd))
+    ts = rpd_timeseries(square_wave(rpd), DT)
     assert np.allclose(ts.rpd, rpd)
 
 
@@ -229,10 +230,10 @@ def test_pronk_with_jitter_across_seam():
     followers = list(range(40, 500, 40))
     rf = list(range(39, 400, 40)) + [441, 481]
     grf = grf_from_touchdowns([rf, followers, followers, followers], 500)
-    ff = footfall_phases(touchdowns(grf))
+    ff = footfall_phases(touchdowns(grf, DT))
     window = ff.phase[0][ff.cycle[0] >= len(rf) - 3]  # LF's touchdowns in the last two cycles
     assert np.allclose(np.sort(window), [2 * PI / 42, 2 * PI * 39 / 40, 2 * PI * 41 / 42])
-    ts = rpd_timeseries(grf)  # one checkpoint at 5 s: the last two cycles
+    ts = rpd_timeseries(grf, DT)  # one checkpoint at 5 s: the last two cycles
     assert ts.labels.tolist() == ["pronk"]
     assert np.all(circular_difference(ts.rpd, 0.0) < 0.1)
     # An arithmetic mean of the same phases would sit near (pi, pi, pi), a Transition corner.
@@ -245,7 +246,7 @@ def test_drifting_pattern_passes_through_transition():
     grf = square_wave(IDEAL_GAITS["trot"])
     t = (np.arange(T) + 1) * 0.01
     grf[:, 3] = 0.5 * (np.mod(2.525 * t, 1.0) < 0.5)
-    ts = rpd_timeseries(grf)
+    ts = rpd_timeseries(grf, DT)
     labels = ts.labels.tolist()
     assert labels[0] == "trot" and labels[-1] == "trot"
     assert labels[3] == TRANSITION  # t = 20 s
@@ -258,15 +259,15 @@ def test_drifting_pattern_passes_through_transition():
 def test_missing_or_dragging_leg_makes_window_invalid():
     grf = square_wave(IDEAL_GAITS["trot"])
     grf[:, 3] = 0.0  # three-legged: LH never touches down
-    ts = rpd_timeseries(grf)
+    ts = rpd_timeseries(grf, DT)
     assert not ts.valid.any()
     assert (ts.labels == TRANSITION).all()
     grf[2000:, 3] = square_wave(IDEAL_GAITS["trot"])[2000:, 3]
-    ts = rpd_timeseries(grf)
+    ts = rpd_timeseries(grf, DT)
     assert ts.valid.tolist() == [False] * 4 + [True] * 4
     assert ts.labels.tolist() == [TRANSITION] * 4 + ["trot"] * 4
     grf[:, 1] = 0.3 + 0.1 * (np.arange(T) % 40 < 20)  # LF drags: always loaded, never lands
-    ts = rpd_timeseries(grf)
+    ts = rpd_timeseries(grf, DT)
     assert not ts.valid.any() and (ts.labels == TRANSITION).all()
 
 
@@ -285,7 +286,7 @@ def test_window_uses_last_two_complete_cycles():
 
 def test_slow_gait_without_two_cycles_is_invalid():
     grf = square_wave(IDEAL_GAITS["pace"], n_steps=1000, period=400)  # 0.25 Hz, first TD at 400
-    ts = rpd_timeseries(grf)
+    ts = rpd_timeseries(grf, DT)
     assert ts.times.tolist() == [5.0, 10.0]
     assert ts.valid.tolist() == [False, False]  # RF cycles end at 800 only
 
@@ -299,11 +300,11 @@ def test_phase_and_contact_methods_agree():
     phase = np.mod(2 * PI * 2.5 * t[:, None] + offsets, 2 * PI)
     grf = 0.3 * (phase >= PI)  # stance is [pi, 2pi)
     assert np.allclose(circular_difference(oscillator_rpd(phase), rpd), 0.0, atol=1e-9)
-    td_phase, td_contact = phase_touchdowns(phase), touchdowns(grf)
+    td_phase, td_contact = phase_touchdowns(phase), touchdowns(grf, DT)
     for a, b in zip(td_phase, td_contact):
         # A touchdown within the first 0.05 s has no full swing on record: contacts skip it.
         assert np.array_equal(a[a >= 5], b)
-    ts_c, ts_p = rpd_timeseries(grf), rpd_timeseries(phase, method="phase")
+    ts_c, ts_p = rpd_timeseries(grf, DT), rpd_timeseries(phase, DT, method="phase")
     assert np.allclose(ts_c.rpd, ts_p.rpd)
     assert agreement(ts_c.labels, ts_p.labels) == 1.0
     assert np.all(circular_difference(ts_c.rpd, rpd) < 2 * PI / 40 + 1e-9)  # one-step quantisation
@@ -312,10 +313,10 @@ def test_phase_and_contact_methods_agree():
 def test_batched_timeseries_and_counts():
     gaits = ["trot", "pace", "bound", "pronk", "trot"]
     grf = np.stack([square_wave(IDEAL_GAITS[g]) for g in gaits])
-    ts = rpd_timeseries(grf)
+    ts = rpd_timeseries(grf, DT)
     assert ts.rpd.shape == (5, 8, 3) and ts.labels.shape == (5, 8)
     assert ts.labels[:, 0].tolist() == gaits
     counts = gait_counts(ts.labels, axis=0)
     assert counts["trot"].tolist() == [2] * 8 and counts[TRANSITION].tolist() == [0] * 8
     with pytest.raises(ValueError):
-        rpd_timeseries(grf[..., :3])
+        rpd_timeseries(grf[..., :3], DT)

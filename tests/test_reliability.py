@@ -171,9 +171,9 @@ def test_export_refuses_a_policy_that_went_non_finite(run_copy, tmp_path):
 
     session = play.Session(play.build_parser().parse_args(["--load_run", run_copy, "--num_envs", "1"]))
     with torch.no_grad():
-        next(session.runner.alg.get_policy().parameters()).fill_(float("inf"))
+        next(session.policy.model.parameters()).fill_(float("inf"))
     with pytest.raises(ConfigError, match=r"not exporting model_1.pt: tensor .* holds \d+ NaN or infinite"):
-        export_deployment(session.runner, session.task, str(tmp_path / "exported"), "model_1.pt")
+        export_deployment(session.policy.model, session.task, str(tmp_path / "exported"), "model_1.pt")
     assert not (tmp_path / "exported").exists()
 
 

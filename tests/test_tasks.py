@@ -11,8 +11,7 @@ from gym_envs.config import apply_overrides
 from gym_envs.legged_robot import sample_commands
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
 from gym_envs.orc import parse_orc, parse_training_orc
-
-TWO_PI = 2 * math.pi
+from gym_envs.oscillators import TWO_PI
 
 
 def osc_env(num_envs=4, overrides=(), **osc):
