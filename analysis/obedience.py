@@ -80,10 +80,6 @@ class Obedience:
     started: dict[str, StartedGait]
     settling: CoupledSettling | None = None
 
-    @property
-    def min_obeyed(self) -> float:
-        return min(s.obeyed for s in self.started.values())
-
     def summary(self) -> str:
         parts = [f"{g} {100 * s.obeyed:.0f}% ({s.velocity:.2f} m/s)" for g, s in self.started.items()]
         text = "obedience " + " / ".join(parts)

@@ -38,10 +38,6 @@ class Ranks:
     def is_distributed(self) -> bool:
         return self.world_size > 1
 
-    @property
-    def is_main(self) -> bool:
-        return self.rank == 0
-
 
 def ranks_from_env() -> Ranks:
     """This process's ranks from torchrun's environment variables."""
