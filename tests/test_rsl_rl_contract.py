@@ -24,17 +24,9 @@ from rsl_rl.utils.utils import resolve_callable
 from learning import runs
 from learning.runner import StopRequest
 from tests.test_cli import _scalars
-from tests.test_learning import small_env, small_runner
+from tests.test_learning import one_torch_thread, small_env, small_runner  # noqa: F401 (autouse fixture)
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def test_installed_rsl_rl_is_inside_the_pinned_range():
