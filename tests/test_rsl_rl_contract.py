@@ -14,7 +14,6 @@ import os
 import re
 from importlib.metadata import version
 
-import pytest
 import torch
 from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
