@@ -131,3 +131,24 @@ def test_device_choice_and_thread_share_of_many_processes():
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="no CUDA device"):
             distributed.resolve_device("cuda", distributed.Ranks())
+
+
+def test_sigterm_to_torchrun_stops_every_rank_at_one_iteration_with_a_checkpoint(tmp_path):
+    """What a cluster scheduler sends: torchrun passes SIGTERM on to the ranks, which save as for Ctrl-C
+    (torchrun itself then exits 1 with its own SignalException, as it does for any SIGTERM)."""
+    logs = tmp_path / "logs"
+    proc = torchrun(logs, tmp_path / "sync", "--task", "mini_cheetah_osc", "--max_iterations", "1000")
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if re.search(r"\bit +2/1000", line):
+            proc.send_signal(signal.SIGTERM)
+            break
+    out = "".join(lines) + proc.communicate(timeout=120)[0]
+    stopped = re.findall(r"stopped at iteration (\d+); saved", out)
+    assert len(stopped) == 1 and "SIGTERM: stopping after this step" in out, out
+    last = int(stopped[0])
+    run = only_run(logs)
+    assert runs.list_checkpoints(run)[-1] == last >= 2
+    rank0, rank1 = sync_logs(tmp_path / "sync")
+    assert rank0 == rank1 and rank0[-1] == (last, checkpoint_digest(run, last))
