@@ -38,6 +38,18 @@ def finish(proc: subprocess.Popen) -> str:
     return out
 
 
+def signal_at(proc: subprocess.Popen, pattern: str, signum: int, timeout: float = 120) -> tuple[str, float | None]:
+    """Send `signum` when a line of `proc`'s output matches `pattern`; (all its output, when it was sent)."""
+    lines, sent = [], None
+    for line in proc.stdout:
+        lines.append(line)
+        if re.search(pattern, line):
+            proc.send_signal(signum)
+            sent = time.monotonic()
+            break
+    return "".join(lines) + proc.communicate(timeout=timeout)[0], sent
+
+
 def sync_logs(folder) -> list[list[tuple[int, str]]]:
     """Per rank: (iteration, network digest) after each update, in order."""
     logs = []
@@ -98,14 +110,7 @@ def test_a_second_identical_launch_gives_the_same_networks(two_launches):
 def test_ctrl_c_stops_every_rank_and_resume_continues_on_both(tmp_path):
     logs = tmp_path / "logs"
     proc = torchrun(logs, tmp_path / "sync", "--task", "mini_cheetah_osc", "--max_iterations", "1000")
-    lines, signalled = [], None
-    for line in proc.stdout:
-        lines.append(line)
-        if re.search(r"\bit +2/1000", line):
-            proc.send_signal(signal.SIGINT)  # what a terminal's Ctrl-C sends to torchrun
-            signalled = time.monotonic()
-            break
-    out = "".join(lines) + proc.communicate(timeout=120)[0]
+    out, signalled = signal_at(proc, r"\bit +2/1000", signal.SIGINT)  # what a terminal's Ctrl-C sends to torchrun
     assert signalled is not None, out
     assert time.monotonic() - signalled < KILL_TIMEOUT_S, out  # the ranks exited; torchrun did not kill them
     stopped = re.findall(r"stopped at iteration (\d+); saved", out)
@@ -138,13 +143,7 @@ def test_sigterm_to_torchrun_stops_every_rank_at_one_iteration_with_a_checkpoint
     (torchrun itself then exits 1 with its own SignalException, as it does for any SIGTERM)."""
     logs = tmp_path / "logs"
     proc = torchrun(logs, tmp_path / "sync", "--task", "mini_cheetah_osc", "--max_iterations", "1000")
-    lines = []
-    for line in proc.stdout:
-        lines.append(line)
-        if re.search(r"\bit +2/1000", line):
-            proc.send_signal(signal.SIGTERM)
-            break
-    out = "".join(lines) + proc.communicate(timeout=120)[0]
+    out, _ = signal_at(proc, r"\bit +2/1000", signal.SIGTERM)
     stopped = re.findall(r"stopped at iteration (\d+); saved", out)
     assert len(stopped) == 1 and "SIGTERM: stopping after this step" in out, out
     last = int(stopped[0])

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -14,6 +13,7 @@ import torch
 
 import sweep
 from learning import runs
+from tests.test_distributed import signal_at
 
 TINY = ["--num_envs", "16", "--num_threads", "1", "--set", "train.num_steps_per_env=4", "--set", "env.episode_length_s=0.05"]
 
@@ -91,13 +91,7 @@ def test_sigterm_stops_the_sweep_with_a_checkpoint_and_the_next_sweep_resumes_it
     cmd = [sys.executable, "-u", "sweep.py", "--out", str(tmp_path), "--orcs", "111", "010", "--seeds", "3",
            "--max_iterations", "1000", *TINY]
     proc = subprocess.Popen(cmd, cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    lines = []
-    for line in proc.stdout:
-        lines.append(line)
-        if re.search(r"\bit +3/1000", line):
-            proc.send_signal(signal.SIGTERM)
-            break
-    out = "".join(lines) + proc.communicate(timeout=60)[0]
+    out, _ = signal_at(proc, r"\bit +3/1000", signal.SIGTERM, timeout=60)
     assert proc.returncode == 143, out
     run_dir = str(tmp_path / "ORC_111" / "seed3")
     last = runs.list_checkpoints(run_dir)[-1]
