@@ -112,7 +112,9 @@ def main(argv: list[str] | None = None) -> int:
             if everywhere is None and not missed and obeys(result):
                 everywhere = (clock / 60, it, result)
     runner.save(runs.checkpoint_path(run_dir, runner.current_learning_iteration))
-    goals = [("walking", walking), ("obedience", obedient)] + ([("envelope and obedience", everywhere)] * args.envelope)
+    goals = [("walking", walking), ("obedience", obedient)]
+    if args.envelope:
+        goals.append(("envelope and obedience", everywhere))
     for name, reached in goals:
         if reached is None:
             print(f"minutes to {name}: not reached within {args.max_minutes:g}")

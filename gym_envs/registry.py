@@ -1,6 +1,6 @@
 """Task registry: one entry per task names its task class, env config, train config and CPU recipe.
 
-    register("my_robot", MyRobot, MyRobotCfg, MyRobotTrainCfg, cpu_profile="cpu_fast")
+    register("my_robot", MyRobot, MyRobotCfg, MyRobotTrainCfg)   # cpu_profile="..." for its own CPU recipe
 
 is all a new task needs for `train.py --task my_robot`, play.py and the analysis to find it.
 """
@@ -23,14 +23,15 @@ class TaskSpec:
     task_class: type[LeggedRobot]
     env_cfg: type[LeggedRobotCfg]
     train_cfg: type[TrainCfg]
-    cpu_profile: str  # a profile of learning.runner_config.PROFILES: what a CPU runs without --profile
+    cpu_profile: str | None  # a profile of learning.runner_config.PROFILES run on a CPU without --profile;
+    # None: the generic CPU recipe (learning.machine.CPU_PROFILE)
 
 
 TASKS: dict[str, TaskSpec] = {}
 
 
 def register(name: str, task_class: type[LeggedRobot], env_cfg: type[LeggedRobotCfg], train_cfg: type[TrainCfg],
-             cpu_profile: str = "cpu_fast") -> None:
+             cpu_profile: str | None = None) -> None:
     TASKS[name] = TaskSpec(task_class, env_cfg, train_cfg, cpu_profile)
 
 

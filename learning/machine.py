@@ -24,10 +24,10 @@ CPU_PROFILE, GPU_PROFILE = "cpu_fast", "paper"
 
 
 def cpu_profile(task: str | None) -> str:
-    """The CPU recipe of a task (its registry entry's), cpu_fast when the task is not known (yet)."""
+    """The CPU recipe of a task: its registry entry's, else (none named, or the task not known yet) cpu_fast."""
     from gym_envs.registry import TASKS
 
-    return TASKS[task].cpu_profile if task in TASKS else CPU_PROFILE
+    return (TASKS[task].cpu_profile if task in TASKS else None) or CPU_PROFILE
 
 
 def cpu_recipes_text() -> str:
@@ -39,8 +39,8 @@ def cpu_recipes_text() -> str:
     def size(name: str) -> str:
         return f"{profile_setting(name, 'env.num_envs')} robots x {profile_setting(name, 'train.num_steps_per_env')} steps"
 
-    parts = [f"{name}, {profile_setting(name, 'train.max_iterations')} iterations, for {task}"
-             for task, name in ((task, spec.cpu_profile) for task, spec in TASKS.items()) if name != CPU_PROFILE]
+    parts = [f"{spec.cpu_profile}, {profile_setting(spec.cpu_profile, 'train.max_iterations')} iterations, for {task}"
+             for task, spec in TASKS.items() if spec.cpu_profile]
     parts.append(f"{CPU_PROFILE}, {profile_setting(CPU_PROFILE, 'train.max_iterations')} iterations, for other tasks")
     return f"{size(CPU_PROFILE)}: " + "; ".join(parts)
 

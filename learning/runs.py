@@ -39,6 +39,7 @@ import yaml
 from gym_envs.config import ConfigError, load_yaml
 from gym_envs.files import atomic_write
 from gym_envs.legged_robot_config import REPO_ROOT
+
 DEFAULT_LOG_ROOT = os.path.join(REPO_ROOT, "logs")
 POLICY_ROOT = os.path.join(REPO_ROOT, "resources", "policies")
 ENV_YAML, TRAIN_YAML = "env.yaml", "train.yaml"
@@ -576,8 +577,7 @@ def run_file(run_dir: str, name: str) -> str:
 def load_run_configs(run_dir: str) -> tuple[str, Any, Any]:
     """(task, env config, train config) of a run folder, rebuilt from its YAMLs; values outside the rules are
     errors naming the file (they were saved checked, so the file was edited)."""
-    from gym_envs.registry import env_cfg_class
-    from gym_envs.registry import train_cfg_class
+    from gym_envs.registry import env_cfg_class, train_cfg_class
 
     train_path = run_file(run_dir, TRAIN_YAML)
     task = run_task(run_dir)
