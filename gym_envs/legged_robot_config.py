@@ -86,6 +86,9 @@ class RewardsCfg:
     # squared exponential, with a gradient across the whole +-3 rad/s range); 'released_quartic' is the
     # released code's exp(-4 ((c - w) / 5)^4), nearly flat within 1 rad/s (docs/design.md).
     yaw_tracking: str = "sqexp"
+    # 'relative' divides each tracking error by 1 + |command| (released code), so a shortfall at 3 m/s
+    # costs a sixteenth of the same shortfall at rest; 'absolute' holds every command to one width.
+    tracking_error: str = "relative"
     base_height_target: float = 0.33
 
 
@@ -168,6 +171,7 @@ class LeggedRobotCfg:
         "rewards.base_height_target": POSITIVE,
         "init_state.mode": OneOf(("range", "default")),
         "rewards.yaw_tracking": OneOf(("sqexp", "released_quartic")),
+        "rewards.tracking_error": OneOf(("relative", "absolute")),
         "init_state.base_height": POSITIVE,
         "init_state.lin_vel_x": Ordered(),
         "init_state.lin_vel_y": Ordered(),

@@ -81,16 +81,20 @@ class MiniCheetah(LeggedRobot):
     def _sqexp(self, x):
         return torch.exp(-torch.square(x) / self.cfg.rewards.tracking_sigma)
 
+    def _tracking_error(self, command, measured):
+        if self.cfg.rewards.tracking_error == "absolute":
+            return command - measured
+        return (command - measured) / (1.0 + command.abs())
+
     def _reward_tracking_lin_vel(self):
-        # Errors are relative to the command's size, so fast commands are not held to tighter bounds.
-        error = (self.commands[:, :2] - self.base_lin_vel[:, :2]) / (1.0 + self.commands[:, :2].abs())
+        error = self._tracking_error(self.commands[:, :2], self.base_lin_vel[:, :2])
         return torch.exp(-torch.sum(error**2, dim=1) / self.cfg.rewards.tracking_sigma)
 
     def _reward_tracking_ang_vel(self):
-        error = self.commands[:, 2] - self.base_ang_vel[:, 2]
         if self.cfg.rewards.yaw_tracking == "released_quartic":
+            error = self.commands[:, 2] - self.base_ang_vel[:, 2]
             return self._sqexp((error / 5.0) ** 2)  # squared twice: 0.994 of the reward at a 1 rad/s error
-        return self._sqexp(error / (1.0 + self.commands[:, 2].abs()))
+        return self._sqexp(self._tracking_error(self.commands[:, 2], self.base_ang_vel[:, 2]))
 
     def _reward_orientation(self):
         return torch.sum(self._sqexp(self.projected_gravity[:, :2]), dim=1)

@@ -200,6 +200,20 @@ def test_yaw_tracking_pays_for_a_1_rad_s_error_unless_the_released_quartic_is_as
     assert quartic[1] == pytest.approx(math.exp(-((1 / 5) ** 4) / 0.25)) and quartic[1] > 0.99
 
 
+def test_absolute_tracking_errors_hold_a_fast_command_to_the_width_of_a_slow_one():
+    def tracking(form):
+        env = quiet_standing(2, overrides_extra=[f"rewards.tracking_error={form}"])
+        env.commands[:] = torch.tensor([[1.0, 0.0, 1.0], [3.0, 0.0, 3.0]])
+        env.base_lin_vel = torch.tensor([[0.7, 0.0, 0.0], [2.7, 0.0, 0.0]])  # 0.3 m/s short of each
+        env.base_ang_vel = torch.tensor([[0.0, 0.0, 0.7], [0.0, 0.0, 2.7]])
+        return env._reward_tracking_lin_vel().tolist(), env._reward_tracking_ang_vel().tolist()
+    lin, yaw = tracking("relative")
+    assert lin == pytest.approx([math.exp(-(0.15**2) / 0.25), math.exp(-(0.075**2) / 0.25)])
+    assert yaw == pytest.approx(lin)
+    lin, yaw = tracking("absolute")
+    assert lin == pytest.approx([math.exp(-(0.3**2) / 0.25)] * 2) and yaw == pytest.approx(lin)
+
+
 def test_the_standing_schedule_reads_the_whole_command_when_asked():
     commands = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, -1.5], [0.0, 0.5, 0.0], [1.0, 0.0, 0.0]])
     for rule, standing in (("lin_vel_x", [True, True, True, False]), ("command", [True, False, False, False])):
