@@ -13,7 +13,6 @@ Usage: python -m analysis.balanced_legs --runs DIR --out DIR [--quick]
 
 from __future__ import annotations
 
-import csv
 import sys
 from pathlib import Path
 
@@ -27,6 +26,7 @@ from analysis.plotting import (
     paper_style,
     save_figure,
     sort_configs,
+    write_csv,
 )
 from analysis.rollout import EvalSettings, Job, cli_main, run_jobs
 
@@ -90,8 +90,8 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
             rows.append({"config": policy.orc, "run": policy.name, "robot": i, "fell": bool(fell[i]),
                          **{leg: float(g[i, j]) for j, leg in enumerate(LEG_NAMES)}})
 
-    per_robot_csv = out / f"{FILE_STEM}.csv"
-    _write_csv(per_robot_csv, rows, ["config", "run", "robot", "fell", *LEG_NAMES])
+    fields = ["config", "run", "robot", "fell", *LEG_NAMES]
+    per_robot_csv = write_csv(out / f"{FILE_STEM}.csv", fields, ([r[k] for k in fields] for r in rows))
 
     configs = sort_configs({r["config"] for r in rows})
     pooled = {c: np.array([[r[leg] for leg in LEG_NAMES] for r in rows if r["config"] == c]) for c in configs}
@@ -99,18 +99,13 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     n_policies = {c: len({r["run"] for r in rows if r["config"] == c}) for c in configs}
     stats = {c: leg_statistics(pooled[c]) for c in configs}
 
-    summary_csv = out / f"{FILE_STEM}_summary.csv"
-    summary_rows = []
-    for c in configs:
-        s = stats[c]
-        row = {"config": c, "policies": n_policies[c], "robots": s["n"], "falls": falls[c],
-               "frac_leg_near_zero": f"{s['frac_leg_near_zero']:.4f}",
-               "mean_max_deviation": f"{s['mean_max_deviation']:.4f}"}
-        for j, leg in enumerate(LEG_NAMES):
-            row[f"median_{leg}"] = f"{s['median'][j]:.4f}"
-            row[f"iqr_{leg}"] = f"{s['iqr'][j]:.4f}"
-        summary_rows.append(row)
-    _write_csv(summary_csv, summary_rows, list(summary_rows[0]))
+    spreads = ("median", "iqr")
+    summary_csv = write_csv(
+        out / f"{FILE_STEM}_summary.csv",
+        ["config", "policies", "robots", "falls", "frac_leg_near_zero", "mean_max_deviation",
+         *(f"{what}_{leg}" for leg in LEG_NAMES for what in spreads)],
+        ([c, n_policies[c], s["n"], falls[c], f"{s['frac_leg_near_zero']:.4f}", f"{s['mean_max_deviation']:.4f}",
+          *(f"{s[what][j]:.4f}" for j in range(len(LEG_NAMES)) for what in spreads)] for c, s in stats.items()))
 
     with paper_style():
         fig = plot(pooled)
@@ -170,13 +165,6 @@ def _violin(ax, x, values, color, width):
         q25, med, q75 = np.percentile(values, [25, 50, 75])
         ax.plot([x, x], [q25, q75], color="k", lw=0.8, solid_capstyle="butt")
         ax.plot(x, med, "o", ms=1.8, mfc="white", mec="k", mew=0.4)
-
-
-def _write_csv(path, rows, fields):
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields)
-        w.writeheader()
-        w.writerows(rows)
 
 
 def main(argv=None) -> int:

@@ -23,7 +23,6 @@ Usage: python -m analysis.disturbance --runs DIR --out DIR [--quick] [--push_slo
 
 from __future__ import annotations
 
-import csv
 import math
 import sys
 from dataclasses import dataclass, replace
@@ -31,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.plotting import COLUMN_WIDTH, config_color, paper_style, save_figure, sort_configs
+from analysis.plotting import COLUMN_WIDTH, config_color, paper_style, save_figure, sort_configs, write_csv
 from analysis.rollout import DEFAULT_MAX_BATCH, EvalSettings, Job, cli_main, run_jobs
 
 import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
@@ -215,13 +214,11 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
                 "vx_test": r.data["base_lin_vel"][:, tl["test_start"] - 1:, 0].mean(axis=0),
             })
 
-    per_policy_csv = out / f"{FILE_STEM}_per_policy.csv"
-    with open(per_policy_csv, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["config", "run", "impulse_mps", "robots", "failures", "failure_rate_pct", "falls_before_push"])
-        for r in records:
-            w.writerow([r["config"], r["run"], r["magnitude"], r["robots"], r["failures"],
-                        f"{r['failure_rate_pct']:.4f}", r["falls_before_push"]])
+    per_policy_csv = write_csv(
+        out / f"{FILE_STEM}_per_policy.csv",
+        ["config", "run", "impulse_mps", "robots", "failures", "failure_rate_pct", "falls_before_push"],
+        ([r["config"], r["run"], r["magnitude"], r["robots"], r["failures"], f"{r['failure_rate_pct']:.4f}",
+          r["falls_before_push"]] for r in records))
 
     configs = sort_configs({r["config"] for r in records})
     rates = {c: {m: [r["failure_rate_pct"] for r in records if r["config"] == c and r["magnitude"] == m]
@@ -230,15 +227,11 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     table_path = out / f"{FILE_STEM}_table.md"
     table_path.write_text(f"Failure rate [%] after a velocity impulse, mean ± std over policies\n\n{table_md}\n")
 
-    summary_csv = out / f"{FILE_STEM}_summary.csv"
     stats = {c: {m: (*mean_std(rates[c][m]), len(rates[c][m])) for m in magnitudes} for c in configs}
-    with open(summary_csv, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["config", "impulse_mps", "policies", "mean_pct", "std_pct"])
-        for c in configs:
-            for m in magnitudes:
-                mean, std, n = stats[c][m]
-                w.writerow([c, m, n, f"{mean:.4f}", f"{std:.4f}"])
+    summary_csv = write_csv(out / f"{FILE_STEM}_summary.csv",
+                            ["config", "impulse_mps", "policies", "mean_pct", "std_pct"],
+                            ([c, m, n, f"{mean:.4f}", f"{std:.4f}"] for c in configs
+                             for m, (mean, std, n) in stats[c].items()))
 
     with paper_style():
         figs = save_figure(plot_failure_rates(stats, magnitudes), out, f"{FILE_STEM}_failure_rate")

@@ -14,7 +14,6 @@ Usage: python -m analysis.envelope [--runs DIR] --out DIR [--quick]
 
 from __future__ import annotations
 
-import csv
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import gait
-from analysis.plotting import sort_configs
+from analysis.plotting import sort_configs, write_csv
 from analysis.rollout import EvalSettings, Job, cli_main, run_jobs
 
 # name -> (v_x [m/s], v_y [m/s], yaw rate [rad/s]): the paper's envelope at the points a user tries first.
@@ -129,16 +128,13 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     results.sort(key=lambda r: (sort_configs([r.orc]), r.policy, order[r.name]))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    files = {"csv": out / f"{FILE_STEM}.csv"}
-    with open(files["csv"], "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["policy", "orc", "command_name", *(f"command_{a}" for a in AXES), "robots",
-                    *(f"tracked_{a}" for a in AXES), *(f"error_{a}" for a in AXES), "falls", "met",
-                    "identical_robots", "gaits", "step_frequency_hz"])
-        for r in results:
-            w.writerow([r.policy, r.orc, r.name, *r.command, r.robots, *(f"{x:.4f}" for x in r.tracked),
-                        *(f"{x:.4f}" for x in r.error), r.falls, int(r.met), int(r.alike), gait.mix_text(r.gaits),
-                        f"{r.step_frequency:.3f}"])
+    files = {"csv": write_csv(out / f"{FILE_STEM}.csv",
+                              ["policy", "orc", "command_name", *(f"command_{a}" for a in AXES), "robots",
+                               *(f"tracked_{a}" for a in AXES), *(f"error_{a}" for a in AXES), "falls", "met",
+                               "identical_robots", "gaits", "step_frequency_hz"],
+                              ([r.policy, r.orc, r.name, *r.command, r.robots, *(f"{x:.4f}" for x in r.tracked),
+                                *(f"{x:.4f}" for x in r.error), r.falls, int(r.met), int(r.alike),
+                                gait.mix_text(r.gaits), f"{r.step_frequency:.3f}"] for r in results))}
     if progress:
         print("\n".join(summary_lines(results)), file=sys.stderr)
     return {"files": files, "results": results, "sizes": dict(sizes), "settings": settings.describe()}

@@ -10,19 +10,17 @@ Usage: python -m analysis.fixed_points --out results/fixed_points [--quick]
 
 from __future__ import annotations
 
-import csv
 import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-import matplotlib
+import torch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import torch  # noqa: E402
+from analysis.plotting import save_figure, write_csv
+from gym_envs.oscillators import fixed_points, oscillator_velocity
 
-from gym_envs.oscillators import fixed_points, oscillator_velocity  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
 
 GRF = 0.25
 FILE_STEM = "oscillator_fixed_points"
@@ -62,27 +60,13 @@ def run(out_dir, quick: bool = False) -> dict:
     values = {c.name: curve_values(c, phase) for c in CURVES}
     fps = {c.name: [(p.phase, p.stability) for p in fixed_points(GRF, c.omega, c.sigma, c.xi)] for c in CURVES}
 
-    csv_path = out / f"{FILE_STEM}.csv"
-    with open(csv_path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["phase_rad"] + [c.name for c in CURVES])
-        for i in range(n):
-            w.writerow([f"{phase[i].item():.9g}"] + [f"{values[c.name][i].item():.9g}" for c in CURVES])
-
-    fp_path = out / f"{FILE_STEM}_points.csv"
-    with open(fp_path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["curve", "omega_hz", "sigma", "xi", "phase_rad", "stability"])
-        for c in CURVES:
-            for p, s in fps[c.name]:
-                w.writerow([c.name, c.omega, c.sigma, c.xi, f"{p:.9g}", s])
-
-    fig = _plot(phase, values, fps)
-    png_path, pdf_path = out / f"{FILE_STEM}.png", out / f"{FILE_STEM}.pdf"
-    fig.savefig(png_path, dpi=150 if quick else 300)
-    fig.savefig(pdf_path)
-    plt.close(fig)
-    return {"csv": csv_path, "points_csv": fp_path, "png": png_path, "pdf": pdf_path, "fixed_points": fps}
+    csv_path = write_csv(out / f"{FILE_STEM}.csv", ["phase_rad"] + [c.name for c in CURVES],
+                         ([f"{phase[i].item():.9g}"] + [f"{values[c.name][i].item():.9g}" for c in CURVES]
+                          for i in range(n)))
+    fp_path = write_csv(out / f"{FILE_STEM}_points.csv", ["curve", "omega_hz", "sigma", "xi", "phase_rad", "stability"],
+                        ([c.name, c.omega, c.sigma, c.xi, f"{p:.9g}", s] for c in CURVES for p, s in fps[c.name]))
+    figure = save_figure(_plot(phase, values, fps), out, FILE_STEM, dpi=150 if quick else 300)
+    return {"csv": csv_path, "points_csv": fp_path, **figure, "fixed_points": fps}
 
 
 def _plot(phase, values, fps):

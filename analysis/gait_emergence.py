@@ -20,7 +20,6 @@ Usage: python -m analysis.gait_emergence --runs DIR --out DIR [--quick]
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import itertools
 import math
@@ -31,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import gait
-from analysis.plotting import COLUMN_WIDTH, GAIT_COLORS, WIDE_WIDTH, paper_style, save_figure
+from analysis.plotting import COLUMN_WIDTH, GAIT_COLORS, WIDE_WIDTH, paper_style, save_figure, write_csv
 from analysis.rollout import EvalSettings, Job, cli_main, group_by_orc, run_jobs
 
 import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
@@ -166,32 +165,23 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
         return {"files": {}, "experiments": {}, "skipped": "no ORC(111) or ORC(110) policy among the runs"}
 
     results = {key: analyse(r) for key, (_, _, r) in collected.items()}
-    files = {}
+    counts = [[key, collected[key][1].name, f"{t:g}", *(int(res["counts"][g][c]) for g in GAITS),
+               int(res["invalid"][c])] for key, res in results.items() for c, t in enumerate(res["times"])]
+    files = {"counts_csv": write_csv(out / f"{FILE_STEM}_counts.csv",
+                                     ["experiment", "policy", "time_s", *GAITS, "invalid_checkpoints"], counts)}
 
-    counts_csv = out / f"{FILE_STEM}_counts.csv"
-    with open(counts_csv, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["experiment", "policy", "time_s", *GAITS, "invalid_checkpoints"])
-        for key, res in results.items():
-            for c, t in enumerate(res["times"]):
-                w.writerow([key, collected[key][1].name, f"{t:g}", *(int(res["counts"][g][c]) for g in GAITS),
-                            int(res["invalid"][c])])
-    files["counts_csv"] = counts_csv
-
-    rpd_csv = out / f"{FILE_STEM}_rpd.csv"
-    with open(rpd_csv, "w", newline="") as f:
-        w = csv.writer(f)
-        cols = [f"{what}_{leg}" for what in ("offset0", "initial", "final_contact", "final_phase") for leg in RPD_NAMES]
-        w.writerow(["experiment", "run", *cols, "initial_label", "final_label", "fell"])
-        for key, res in results.items():
-            fell = collected[key][2].fell()
-            final_phase = res["phase"].rpd[:, -1]
-            for n in range(res["runs"]):
-                vals = np.concatenate([res["initial_offsets"][n], res["initial_rpd"][n], res["final_rpd"][n],
-                                       final_phase[n]])
-                w.writerow([key, n, *(f"{v:.5f}" for v in vals), res["initial_labels"][n], res["final_labels"][n],
-                            int(fell[n])])
-    files["rpd_csv"] = rpd_csv
+    rows = []
+    for key, res in results.items():
+        fell = collected[key][2].fell()
+        final_phase = res["phase"].rpd[:, -1]
+        for n in range(res["runs"]):
+            vals = np.concatenate([res["initial_offsets"][n], res["initial_rpd"][n], res["final_rpd"][n],
+                                   final_phase[n]])
+            rows.append([key, n, *(f"{v:.5f}" for v in vals), res["initial_labels"][n], res["final_labels"][n],
+                         int(fell[n])])
+    cols = [f"{what}_{leg}" for what in ("offset0", "initial", "final_contact", "final_phase") for leg in RPD_NAMES]
+    files["rpd_csv"] = write_csv(out / f"{FILE_STEM}_rpd.csv",
+                                 ["experiment", "run", *cols, "initial_label", "final_label", "fell"], rows)
 
     with paper_style():
         fig = plot_scatter({k: (collected[k][0], results[k]) for k in results})

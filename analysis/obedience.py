@@ -20,7 +20,6 @@ Usage: python -m analysis.obedience [--runs DIR] --out DIR [--quick]
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import sys
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import gait
-from analysis.plotting import COLUMN_WIDTH, GAIT_COLORS, paper_style, save_figure, sort_configs
+from analysis.plotting import COLUMN_WIDTH, GAIT_COLORS, paper_style, save_figure, sort_configs, write_csv
 from analysis.rollout import EvalSettings, Job, PolicyRun, cli_main, run_jobs
 
 import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
@@ -181,23 +180,21 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     results.sort(key=lambda r: (sort_configs([r.orc]), r.policy))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    files = {"csv": out / f"{FILE_STEM}.csv", "settling_csv": out / f"{FILE_STEM}_settling.csv"}
-    with open(files["csv"], "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["policy", "orc", "started_gait", "robots", "obeyed", "phase_agreement", "velocity_mps",
-                    "stance_share", "falls", "identical_robots", *(f"contact_{g}" for g in gait.GAIT_LABELS)])
-        for r in results:
-            for s in r.started.values():
-                w.writerow([r.policy, r.orc, s.gait, s.robots, f"{s.obeyed:.4f}", f"{s.phase_agreement:.4f}",
-                            f"{s.velocity:.4f}", f"{s.stance_share:.4f}", s.falls, int(s.identical),
-                            *(f"{s.contact_mix[g]:.4f}" for g in gait.GAIT_LABELS)])
-    with open(files["settling_csv"], "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["policy", "orc", "time_s", "robots", *gait.GAIT_LABELS])
-        for r in results:
-            if r.settling is not None:
-                for t, mix in zip(r.settling.times, r.settling.mix):
-                    w.writerow([r.policy, r.orc, f"{t:g}", r.settling.robots, *(f"{mix[g]:.4f}" for g in gait.GAIT_LABELS)])
+    files = {
+        "csv": write_csv(out / f"{FILE_STEM}.csv",
+                         ["policy", "orc", "started_gait", "robots", "obeyed", "phase_agreement", "velocity_mps",
+                          "stance_share", "falls", "identical_robots", *(f"contact_{g}" for g in gait.GAIT_LABELS)],
+                         ([r.policy, r.orc, s.gait, s.robots, f"{s.obeyed:.4f}", f"{s.phase_agreement:.4f}",
+                           f"{s.velocity:.4f}", f"{s.stance_share:.4f}", s.falls, int(s.identical),
+                           *(f"{s.contact_mix[g]:.4f}" for g in gait.GAIT_LABELS)]
+                          for r in results for s in r.started.values())),
+        "settling_csv": write_csv(out / f"{FILE_STEM}_settling.csv",
+                                  ["policy", "orc", "time_s", "robots", *gait.GAIT_LABELS],
+                                  ([r.policy, r.orc, f"{t:g}", r.settling.robots,
+                                    *(f"{mix[g]:.4f}" for g in gait.GAIT_LABELS)]
+                                   for r in results if r.settling is not None
+                                   for t, mix in zip(r.settling.times, r.settling.mix))),
+    }
     with paper_style():
         files.update(save_figure(plot(results), out, FILE_STEM))
     return {"files": files, "results": results, "sizes": dict(sizes), "settings": settings.describe()}

@@ -17,7 +17,6 @@ Usage: python -m analysis.pace_to_trot --runs DIR --out DIR [--quick]
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 import sys
@@ -28,7 +27,7 @@ from matplotlib.colors import LinearSegmentedColormap
 
 from analysis import gait
 from analysis.gait_emergence import EXPERIMENTS, first_cycles_rpd, pick_policies
-from analysis.plotting import COLUMN_WIDTH, LEG_NAMES, paper_style, save_figure
+from analysis.plotting import COLUMN_WIDTH, LEG_NAMES, paper_style, save_figure, write_csv
 from analysis.rollout import EvalSettings, Job, cli_main, run_jobs
 from gym_envs.oscillators import TWO_PI
 
@@ -118,12 +117,10 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     grf = rollout.data["grf"][i, :n_window]
     times = rollout.times[:n_window]
 
-    csv_path = out / f"{FILE_STEM}.csv"
-    with open(csv_path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["time_s", *(f"phase_{leg}" for leg in LEG_NAMES), *(f"grf_{leg}" for leg in LEG_NAMES)])
-        for t in range(len(times)):
-            w.writerow([f"{times[t]:.2f}", *(f"{v:.5f}" for v in phase[t]), *(f"{v:.5f}" for v in grf[t])])
+    csv_path = write_csv(out / f"{FILE_STEM}.csv",
+                         ["time_s", *(f"phase_{leg}" for leg in LEG_NAMES), *(f"grf_{leg}" for leg in LEG_NAMES)],
+                         ([f"{times[t]:.2f}", *(f"{v:.5f}" for v in phase[t]), *(f"{v:.5f}" for v in grf[t])]
+                          for t in range(len(times))))
 
     with paper_style():
         fig = plot(phase, grf, title=f"run {i}: {choice['start_label']} at start, {choice['end_label']} at "

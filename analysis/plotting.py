@@ -1,4 +1,4 @@
-"""Shared figure style of the analysis modules: paper column widths, fonts, colours, saving.
+"""Shared output of the analysis modules: paper column widths, fonts, colours, saving figures and CSVs.
 
 The style is applied in a context (`paper_style()`), never at import, so importing an analysis
 module does not change anyone else's matplotlib settings. Figures are written as PNG (for a quick
@@ -8,6 +8,7 @@ look) and PDF (for the paper, fonts embedded as TrueType).
 from __future__ import annotations
 
 import contextlib
+import csv
 from pathlib import Path
 
 import matplotlib
@@ -82,3 +83,12 @@ def save_figure(fig, out_dir, stem: str, dpi: int = 300) -> dict[str, Path]:
     fig.savefig(paths["pdf"])
     plt.close(fig)
     return paths
+
+
+def write_csv(path, header, rows) -> Path:
+    """Write the header row, then `rows`, as CSV to `path`; returns the path."""
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        writer.writerows(rows)
+    return path
