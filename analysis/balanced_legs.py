@@ -36,6 +36,7 @@ BALANCED = 0.25  # each leg carries a quarter of the body weight on average
 NEAR_ZERO = 0.05  # a leg averaging less than this is "held up or dragged" (2- or 3-legged gait)
 PROTOCOL = {"robots_per_policy": 50, "duration_s": 10.0}
 QUICK = {"robots_per_policy": 10, "duration_s": 5.0}
+COMMAND = 1.0  # [m/s] forward
 FILE_STEM = "balanced_legs"
 
 
@@ -65,12 +66,10 @@ def leg_statistics(mean_grf) -> dict:
 
 
 def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-        robots_per_policy: int | None = None, duration_s: float | None = None, command: float = 1.0,
         progress: bool = True) -> dict:
     """Roll out every policy, write the CSVs and the violin figure, return a summary per configuration."""
-    sizes = dict(QUICK if quick else PROTOCOL)
-    robots = robots_per_policy or sizes["robots_per_policy"]
-    duration = duration_s or sizes["duration_s"]
+    sizes = QUICK if quick else PROTOCOL
+    robots, duration = sizes["robots_per_policy"], sizes["duration_s"]
     if not policies:
         raise ValueError("balanced_legs needs at least one policy")
     out = Path(out_dir)
@@ -78,7 +77,7 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
 
     steps = int(round(duration * policies[0].env_cfg.control.frequency_hz))
     jobs = [Job(p, robots) for p in policies]
-    rollouts = run_jobs(jobs, steps, settings, command=(command, 0.0, 0.0), record=("grf", "terminated"),
+    rollouts = run_jobs(jobs, steps, settings, command=(COMMAND, 0.0, 0.0), record=("grf", "terminated"),
                         seed=seed, progress=progress, label="balanced legs")
 
     rows, identical = [], {}
@@ -112,7 +111,7 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     figs = save_figure(fig, out, FILE_STEM)
     return {
         "files": {"csv": per_robot_csv, "summary_csv": summary_csv, **figs},
-        "sizes": {"robots_per_policy": robots, "duration_s": duration, "command_mps": command},
+        "sizes": {"robots_per_policy": robots, "duration_s": duration, "command_mps": COMMAND},
         "settings": settings.describe(),
         "configs": {c: {**stats[c], "falls": falls[c], "policies": n_policies[c], "identical_robots": identical[c]}
                     for c in configs},

@@ -169,16 +169,7 @@ class GaitTimeseries(NamedTuple):
     distance: np.ndarray  # (C,) or (N, C) distance to the nearest ideal gait (NaN where invalid)
 
 
-def rpd_timeseries(
-    signal,
-    dt,
-    interval=CHECKPOINT_INTERVAL,
-    n_cycles=CYCLES_PER_CHECKPOINT,
-    method="contact",
-    threshold=CONTACT_THRESHOLD,
-    min_swing=MIN_SWING_TIME,
-    max_distance=TRANSITION_DISTANCE,
-):
+def rpd_timeseries(signal, dt, interval=CHECKPOINT_INTERVAL, method="contact"):
     """RPD and gait label every `interval` s (checkpoints interval, 2*interval, ... <= T*dt).
 
     signal: GRF (method='contact') or oscillator phases (method='phase'), shape (T, 4) or (N, T, 4), sampled
@@ -200,10 +191,10 @@ def rpd_timeseries(
 
     rpd = np.full((x.shape[0], n_check, 3), np.nan)
     for n in range(x.shape[0]):
-        td = touchdowns(x[n], dt, threshold, min_swing) if method == "contact" else phase_touchdowns(x[n])
-        rpd[n] = window_rpd(footfall_phases(td), last_sample, n_cycles)
+        td = touchdowns(x[n], dt) if method == "contact" else phase_touchdowns(x[n])
+        rpd[n] = window_rpd(footfall_phases(td), last_sample)
     valid = ~np.isnan(rpd).any(axis=-1)
-    labels, distance = classify(rpd, max_distance)
+    labels, distance = classify(rpd)
     if not batched:
         rpd, valid, labels, distance = rpd[0], valid[0], labels[0], distance[0]
     return GaitTimeseries(times, rpd, valid, labels, distance)

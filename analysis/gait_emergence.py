@@ -37,6 +37,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected
 
 PROTOCOL = {"runs": 500, "duration_s": 40.0}
 QUICK = {"runs": 40, "duration_s": 15.0}
+COMMAND = (1.0, 0.0, 0.0)  # 1 m/s forward
 SETTLED_FRACTION = 0.9
 FILE_STEM = "gait_emergence"
 GAITS = gait.GAIT_LABELS  # trot, pace, bound, pronk, transition
@@ -70,21 +71,18 @@ def pick_policies(policies, seed: int = 0) -> dict:
 
 
 def collect(policies, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-            runs: int | None = None, duration_s: float | None = None, command: float = 1.0,
             progress: bool = True) -> dict:
     """Simulate every experiment whose configuration is present: {key: (Experiment, policy, Rollout)}."""
-    sizes = dict(QUICK if quick else PROTOCOL)
-    n_runs = runs or sizes["runs"]
-    duration = duration_s or sizes["duration_s"]
+    sizes = QUICK if quick else PROTOCOL
     chosen = pick_policies(policies, seed)
     out = {}
     for exp in EXPERIMENTS:
         policy = chosen.get(exp.orc)
         if policy is None:
             continue
-        steps = int(round(duration * policy.env_cfg.control.frequency_hz))
+        steps = int(round(sizes["duration_s"] * policy.env_cfg.control.frequency_hz))
         exp_settings = dataclasses.replace(settings, coupling=exp.coupling)
-        (r,) = run_jobs([Job(policy, n_runs)], steps, exp_settings, command=(command, 0.0, 0.0),
+        (r,) = run_jobs([Job(policy, sizes["runs"])], steps, exp_settings, command=COMMAND,
                         record=("grf", "phase", "terminated"), seed=seed, progress=progress,
                         label=f"gait emergence {exp.key}")
         out[exp.key] = (exp, policy, r)
@@ -154,11 +152,10 @@ def _nanmedian(x) -> float:
 
 
 def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-        runs: int | None = None, duration_s: float | None = None, command: float = 1.0, progress: bool = True,
-        collected: dict | None = None) -> dict:
+        progress: bool = True, collected: dict | None = None) -> dict:
     """Simulate (or take `collected` from collect()), write CSVs and figures, return the summary."""
     if collected is None:
-        collected = collect(policies, quick, settings, seed, runs, duration_s, command, progress)
+        collected = collect(policies, quick, settings, seed, progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if not collected:

@@ -87,24 +87,24 @@ def crossings(phase_leg) -> tuple[np.ndarray, np.ndarray]:
 
 
 def collect(policies, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-            runs: int | None = None, progress: bool = True):
+            progress: bool = True):
     """Simulate the ORC(111), sigma = 1 experiment for 10 s (when gait_emergence's data is not at hand)."""
-    sizes = dict(QUICK if quick else PROTOCOL)
+    sizes = QUICK if quick else PROTOCOL
     policy = pick_policies(policies, seed).get("111")
     if policy is None:
         return None
     exp = next(e for e in EXPERIMENTS if e.key == "111_sigma1")
     steps = int(round(sizes["duration_s"] * policy.env_cfg.control.frequency_hz))
-    (r,) = run_jobs([Job(policy, runs or sizes["runs"])], steps, dataclasses.replace(settings, coupling=exp.coupling),
+    (r,) = run_jobs([Job(policy, sizes["runs"])], steps, dataclasses.replace(settings, coupling=exp.coupling),
                     record=("grf", "phase", "terminated"), seed=seed, progress=progress, label="pace to trot")
     return policy, r
 
 
 def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-        runs: int | None = None, progress: bool = True, source=None) -> dict:
+        progress: bool = True, source=None) -> dict:
     """Pick a pace-to-trot run, write its CSV and the polar figure; source = (policy, Rollout) to reuse."""
     if source is None:
-        source = collect(policies, quick, settings, seed, runs, progress)
+        source = collect(policies, quick, settings, seed, progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if source is None:
