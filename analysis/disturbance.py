@@ -30,8 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.plotting import COLUMN_WIDTH, config_color, paper_style, save_figure, sort_configs, write_csv
-from analysis.rollout import DEFAULT_MAX_BATCH, EvalSettings, Job, cli_main, run_jobs
+from analysis.plotting import (COLUMN_WIDTH, config_color, markdown_table, mean_std_text, paper_style, save_figure,
+                               sort_configs, write_csv)
+from analysis.rollout import DEFAULT_MAX_BATCH, EvalSettings, Job, cli_main, pack_batches, run_jobs
 
 import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
 
@@ -107,12 +108,12 @@ def default_ball(quick: bool, slots: int | None = None) -> PushBall:
 # --- scoring --------------------------------------------------------------------------------------
 
 
-def failed(terminated, window_end: int, window_start: int = 0) -> np.ndarray:
-    """(N,) robots with a termination in recorded samples [window_start, window_end) of (N, T) flags."""
+def failed(terminated, window_end: int) -> np.ndarray:
+    """(N,) robots with a termination in recorded samples [0, window_end) of (N, T) flags."""
     terminated = np.asarray(terminated, bool)
     if terminated.ndim != 2:
         raise ValueError(f"expected terminated flags of shape (N, T), got {terminated.shape}")
-    return terminated[:, window_start:window_end].any(axis=1)
+    return terminated[:, :window_end].any(axis=1)
 
 
 def failure_rate(fails) -> float:
@@ -129,7 +130,7 @@ def mean_std(values) -> tuple[float, float]:
     return float(v.mean()), float(v.std(ddof=0))
 
 
-def format_failure_table(rates: dict, magnitudes=None, configs=None, bold_lowest: bool = True) -> str:
+def format_failure_table(rates: dict, magnitudes=None, configs=None) -> str:
     """Markdown table of mean +- std failure rate [%] per impulse (rows) and configuration (columns).
 
     rates[config][magnitude] is the list of per-policy failure rates. The lowest mean of a row is bold,
@@ -139,32 +140,20 @@ def format_failure_table(rates: dict, magnitudes=None, configs=None, bold_lowest
     configs = list(configs) if configs is not None else sort_configs(rates)
     if magnitudes is None:
         magnitudes = sorted({m for c in configs for m in rates.get(c, {})})
-    lines = ["| Impulse [m/s] | " + " | ".join(configs) + " |", "|---|" + "---|" * len(configs)]
+    rows = []
     for m in magnitudes:
-        cells = {}
-        for c in configs:
-            values = rates.get(c, {}).get(m)
-            cells[c] = mean_std(values) if values is not None and len(values) else None
-        means = {c: v[0] for c, v in cells.items() if v is not None and math.isfinite(v[0])}
-        best = min(means.values()) if means else None
-        row = []
-        for c in configs:
-            if cells[c] is None:
-                row.append("–")
-                continue
-            text = f"{cells[c][0]:.1f} ± {cells[c][1]:.1f}"
-            lowest = c in means and abs(means[c] - best) <= 1e-9
-            row.append(f"**{text}**" if bold_lowest and lowest else text)
-        lines.append(f"| {m:.1f} | " + " | ".join(row) + " |")
-    return "\n".join(lines)
+        cells = {c: mean_std(rates[c][m]) for c in configs if len(rates.get(c, {}).get(m, ()))}
+        best = min((mean for mean, _ in cells.values() if math.isfinite(mean)), default=math.nan)
+        rows.append([f"{m:.1f}"] + [mean_std_text(*cells[c], bold=abs(cells[c][0] - best) <= 1e-9)
+                                    if c in cells else "–" for c in configs])
+    return markdown_table(["Impulse [m/s]", *configs], rows)
 
 
 # --- experiment -----------------------------------------------------------------------------------
 
 
 def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-        magnitudes=None, ball: PushBall | None = None, push_slots: int | None = None,
-        max_batch: int = DEFAULT_MAX_BATCH, progress: bool = True) -> dict:
+        push_slots: int | None = None, progress: bool = True) -> dict:
     """Push-ball every policy at every magnitude; write CSVs, Table I (markdown) and figures.
 
     `push_slots` resizes the default ball to that many slots per direction: fewer robots, the same
@@ -172,8 +161,8 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     """
     if not policies:
         raise ValueError("disturbance needs at least one policy")
-    magnitudes = tuple(magnitudes or (QUICK_MAGNITUDES if quick else MAGNITUDES))
-    ball = ball or default_ball(quick, push_slots)
+    magnitudes = QUICK_MAGNITUDES if quick else MAGNITUDES
+    ball = default_ball(quick, push_slots)
     dt = 1.0 / policies[0].env_cfg.control.frequency_hz
     tl = ball.timeline(dt)
     out = Path(out_dir)
@@ -185,20 +174,13 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
             step, delta = ball.pushes(m, dt)
             jobs.append(Job(p, ball.robots, step, delta, tag=m))
     # Simulate chunk by chunk and keep only reductions, so memory stays that of one batch.
-    chunks, current, size = [], [], 0
-    for job in jobs:
-        if current and size + job.num_envs > max_batch:
-            chunks.append(current)
-            current, size = [], 0
-        current.append(job)
-        size += job.num_envs
-    chunks.append(current)
+    chunks = pack_batches(jobs, lambda job: job.num_envs, DEFAULT_MAX_BATCH)
 
     records = []
     for c, chunk in enumerate(chunks):
         rollouts = run_jobs(chunk, tl["total"], settings, command=(ball.command, 0.0, 0.0),
                             command_step=tl["command_step"], record=("terminated", "base_lin_vel"), record_from=1,
-                            seed=seed + 1000 * c, max_batch=max_batch, progress=progress,
+                            seed=seed + 1000 * c, progress=progress,
                             label=f"push ball, part {c + 1}/{len(chunks)}" if len(chunks) > 1 else "push ball")
         for job, r in zip(chunk, rollouts):
             term = r.data["terminated"]

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import matplotlib
 
+from gym_envs.orc import PAPER_CONFIGURATIONS
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
@@ -22,8 +24,8 @@ WIDE_WIDTH = 7.0  # in, both columns
 LEG_NAMES = ("RF", "LF", "RH", "LH")
 LEG_COLORS = ("tab:red", "tab:blue", "tab:orange", "tab:cyan")
 
-# Order of the paper's Table I; 111 and 110 get the strong colours of the released entropy plots.
-CONFIG_ORDER = ("000", "100", "101", "010", "110", "011", "111")
+# In the order of the paper's Table I (PAPER_CONFIGURATIONS); 111 and 110 get the strong colours of the
+# released entropy plots.
 CONFIG_COLORS = {
     "000": "cornflowerblue",
     "100": "yellowgreen",
@@ -64,8 +66,8 @@ def config_color(orc: str) -> str:
 def sort_configs(configs) -> list[str]:
     """Paper order first (Table I), anything else after it, alphabetically."""
     configs = set(configs)
-    known = [c for c in CONFIG_ORDER if c in configs]
-    return known + sorted(configs - set(CONFIG_ORDER))
+    known = [c for c in PAPER_CONFIGURATIONS if c in configs]
+    return known + sorted(configs - set(PAPER_CONFIGURATIONS))
 
 
 @contextlib.contextmanager
@@ -92,3 +94,22 @@ def write_csv(path, header, rows) -> Path:
         writer.writerow(header)
         writer.writerows(rows)
     return path
+
+
+def markdown_table(header, rows) -> str:
+    """A GitHub markdown table; cells are str()-ed and '|' inside a cell is escaped."""
+    def cell(v):
+        return str(v).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(cell(h) for h in header) + " |", "|" + "---|" * len(header)]
+    for row in rows:
+        if len(row) != len(header):
+            raise ValueError(f"row {row!r} has {len(row)} cells for {len(header)} columns")
+        lines.append("| " + " | ".join(cell(v) for v in row) + " |")
+    return "\n".join(lines)
+
+
+def mean_std_text(mean: float, std: float, bold: bool = False) -> str:
+    """A 'mean ± std' table cell with one decimal, as in the paper's Table I; '**...**' when bold."""
+    text = f"{mean:.1f} ± {std:.1f}"
+    return f"**{text}**" if bold else text

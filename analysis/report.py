@@ -20,8 +20,9 @@ import numpy as np
 from analysis import balanced_legs, disturbance, envelope, fixed_points, gait, gait_emergence, obedience, pace_to_trot
 from gym_envs.config import ConfigError
 from gym_envs.mini_cheetah_osc import MiniCheetahOscCfg
+from gym_envs.orc import PAPER_CONFIGURATIONS
 from learning.runs import scan_runs
-from analysis.plotting import LEG_NAMES, sort_configs
+from analysis.plotting import LEG_NAMES, markdown_table, mean_std_text, sort_configs
 from analysis.rollout import (
     DEFAULT_TASK,
     SHIPPED_POLICIES,
@@ -45,7 +46,6 @@ PAPER_TABLE_I = {
     3.5: {"000": (25.0, 13.5, False), "100": (29.7, 12.7, False), "101": (24.0, 17.1, False),
           "010": (10.6, 8.0, False), "110": (13.8, 7.8, False), "011": (13.1, 9.2, False), "111": (7.4, 4.0, True)},
 }
-PAPER_CONFIGS = ("000", "100", "101", "010", "110", "011", "111")
 PAPER_SETTLING = {"111_sigma1": "≈ 10 s", "110_sigma1": "nearly 40 s", "111_sigma0": "no convergence"}
 PAPER_FINAL_GAITS = {
     "111_sigma0": "final ≈ initial (tracks its initial phases); uniform RPDs give ≈ 46 % Transition",
@@ -65,30 +65,11 @@ EXPECTED_FIXED_POINTS = {
 # --- formatting -----------------------------------------------------------------------------------
 
 
-def markdown_table(header, rows) -> str:
-    """A GitHub markdown table; cells are str()-ed and '|' inside a cell is escaped."""
-    def cell(v):
-        return str(v).replace("|", "\\|")
-
-    lines = ["| " + " | ".join(cell(h) for h in header) + " |", "|" + "---|" * len(header)]
-    for row in rows:
-        if len(row) != len(header):
-            raise ValueError(f"row {row!r} has {len(row)} cells for {len(header)} columns")
-        lines.append("| " + " | ".join(cell(v) for v in row) + " |")
-    return "\n".join(lines)
-
-
 def paper_table_markdown() -> str:
     """Table I as printed in the paper (bold entries as there)."""
-    rows = []
-    for m, cells in PAPER_TABLE_I.items():
-        row = [f"{m:.1f}"]
-        for c in PAPER_CONFIGS:
-            mean, std, bold = cells[c]
-            text = f"{mean:.1f} ± {std:.1f}"
-            row.append(f"**{text}**" if bold else text)
-        rows.append(row)
-    return markdown_table(["Impulse [m/s]", *PAPER_CONFIGS], rows)
+    rows = [[f"{m:.1f}", *(mean_std_text(*cells[c]) for c in PAPER_CONFIGURATIONS)]
+            for m, cells in PAPER_TABLE_I.items()]
+    return markdown_table(["Impulse [m/s]", *PAPER_CONFIGURATIONS], rows)
 
 
 def _fmt(x, digits: int = 2, unit: str = "") -> str:

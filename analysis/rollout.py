@@ -147,7 +147,7 @@ def load_policy_run(run_dir: str, checkpoint: int = -1, name: str | None = None)
         name=name or os.path.relpath(run_dir, os.path.dirname(os.path.dirname(run_dir))),
         env_cfg=loaded.env_cfg,
         policy=loaded.policy,
-        task=getattr(loaded, "task", DEFAULT_TASK),
+        task=loaded.task,
         path=run_dir,
     )
 
@@ -312,7 +312,7 @@ def rollout(
     buffers = {name: np.zeros((n, n_rec) + SIGNALS[name].shape, SIGNALS[name].dtype) for name in record}
     initial_phase = env.phase.detach().cpu().numpy().copy()
     # A bar on a terminal only; run_jobs prints one summary line per call either way.
-    bar = tqdm(total=num_steps, desc=label, unit="step", leave=False, disable=not (progress and _on_terminal()))
+    bar = tqdm(total=num_steps, desc=label, unit="step", leave=False, disable=not (progress and sys.stderr.isatty()))
     obs = env.get_observations()
     torch_threads = torch.get_num_threads()
     # The MuJoCo batch has the cores; torch's own thread pool fighting it for them makes the small
@@ -367,11 +367,8 @@ def _push_plan(n, push_step, push_delta) -> dict[int, tuple[np.ndarray, np.ndarr
     push_delta = np.asarray(push_delta, dtype=float)
     if push_step.shape != (n,) or push_delta.shape != (n, 2):
         raise ValueError(f"push_step must be ({n},) and push_delta ({n}, 2), got {push_step.shape}, {push_delta.shape}")
-    plan = {}
-    for step in np.unique(push_step[push_step >= 0]):
-        ids = np.flatnonzero(push_step == step)
-        plan[int(step)] = (ids, push_delta[ids])
-    return plan
+    ids = {int(step): np.flatnonzero(push_step == step) for step in np.unique(push_step[push_step >= 0])}
+    return {step: (robots, push_delta[robots]) for step, robots in ids.items()}
 
 
 @dataclass
@@ -408,16 +405,8 @@ def run_jobs(
     """
     cfgs = [eval_env_cfg(j.run.env_cfg, settings, j.num_envs, seed, num_threads) for j in jobs]
     keys = [_cfg_key(j.run.task, c) for j, c in zip(jobs, cfgs)]
-    batches: list[list[int]] = []
-    for key in dict.fromkeys(keys):
-        current, size = [], 0
-        for i in (i for i, k in enumerate(keys) if k == key):
-            if current and size + jobs[i].num_envs > max_batch:
-                batches.append(current)
-                current, size = [], 0
-            current.append(i)
-            size += jobs[i].num_envs
-        batches.append(current)
+    batches = [batch for key in dict.fromkeys(keys) for batch in pack_batches(
+        [i for i, k in enumerate(keys) if k == key], lambda i: jobs[i].num_envs, max_batch)]
 
     results: list[Rollout | None] = [None] * len(jobs)
     start = time.perf_counter()
@@ -429,12 +418,10 @@ def run_jobs(
         commands = np.concatenate([np.tile(np.asarray(command if jobs[i].command is None else jobs[i].command,
                                                       dtype=np.float32), (jobs[i].num_envs, 1)) for i in members])
         tag = f"{label}, batch {b + 1}/{len(batches)}" if len(batches) > 1 else label
-        out = rollout(
-            StackedPolicy([jobs[i].run.policy for i in members], counts), cfg, num_steps, commands, command_step,
-            record, record_from, push_step, push_delta, jobs[members[0]].run.task, progress, f"{tag} ({total} robots)",
-        )
-        offsets = np.concatenate([[0], np.cumsum(counts)])
-        for i, a, z in zip(members, offsets[:-1], offsets[1:]):
+        policy = StackedPolicy([jobs[i].run.policy for i in members], counts)
+        out = rollout(policy, cfg, num_steps, commands, command_step, record, record_from, push_step, push_delta,
+                      jobs[members[0]].run.task, progress, f"{tag} ({total} robots)")
+        for i, a, z in zip(members, policy.offsets[:-1], policy.offsets[1:]):
             part = out.rows(slice(a, z))
             part.info.update(run=jobs[i].run.name, orc=jobs[i].run.orc, tag=jobs[i].tag, seed=seed + b,
                              settings=settings)
@@ -446,21 +433,24 @@ def run_jobs(
     return results  # type: ignore[return-value]
 
 
-def _on_terminal() -> bool:
-    return sys.stderr.isatty()
+def pack_batches(items: Sequence, size: Callable[[Any], int], max_batch: int) -> list[list]:
+    """The items in order, in consecutive groups whose sizes add up to at most max_batch (an item is never split)."""
+    groups, total = [[]], 0
+    for item in items:
+        if groups[-1] and total + size(item) > max_batch:
+            groups.append([])
+            total = 0
+        groups[-1].append(item)
+        total += size(item)
+    return groups
 
 
 def _stack_pushes(jobs: Sequence[Job]):
     if all(j.push_step is None for j in jobs):
         return None, None
-    steps, deltas = [], []
-    for j in jobs:
-        if j.push_step is None:
-            steps.append(np.full(j.num_envs, -1))
-            deltas.append(np.zeros((j.num_envs, 2)))
-        else:
-            steps.append(np.asarray(j.push_step, dtype=int))
-            deltas.append(np.asarray(j.push_delta, dtype=float))
+    steps = [np.full(j.num_envs, -1) if j.push_step is None else np.asarray(j.push_step, dtype=int) for j in jobs]
+    deltas = [np.zeros((j.num_envs, 2)) if j.push_step is None else np.asarray(j.push_delta, dtype=float)
+              for j in jobs]
     return np.concatenate(steps), np.concatenate(deltas)
 
 
