@@ -150,24 +150,24 @@ def _type_error(tp: Any, value: Any, key: str) -> ConfigError:
     )
 
 
-def _unknown_key(section: str, key: Any, valid: list[str]) -> ConfigError:
+def _did_you_mean(section: str, key: Any, valid: list[str]) -> str:
     close = difflib.get_close_matches(str(key), valid, n=3, cutoff=0.6)
-    hint = "; did you mean " + " or ".join(repr(_join(section, c)) for c in close) + "?" if close else ""
+    return "; did you mean " + " or ".join(repr(_join(section, c)) for c in close) + "?" if close else ""
+
+
+def _unknown_key(section: str, key: Any, valid: list[str]) -> ConfigError:
     where = f"in '{section}'" if section else "at top level"
-    return ConfigError(
-        f"unknown config key '{_join(section, key)}'{hint} (valid keys {where}: {', '.join(valid) or 'none'})"
-    )
+    return ConfigError(f"unknown config key '{_join(section, key)}'{_did_you_mean(section, key, valid)} "
+                       f"(valid keys {where}: {', '.join(valid) or 'none'})")
 
 
 def _check_dict_key(d: dict, key: Any, path: str) -> None:
     """Typo protection for overrides into a dict field: only existing keys, unless the dict is empty."""
     if d and key not in d:
         valid = [str(k) for k in d]
-        close = difflib.get_close_matches(str(key), valid, n=3, cutoff=0.6)
-        hint = "; did you mean " + " or ".join(repr(_join(path, c)) for c in close) + "?" if close else ""
         raise ConfigError(
-            f"unknown key '{_join(path, key)}' in dict '{path}'{hint} (existing keys: {', '.join(valid)}; "
-            f"overrides may only change existing keys - add new ones in the task config class)"
+            f"unknown key '{_join(path, key)}' in dict '{path}'{_did_you_mean(path, key, valid)} (existing keys: "
+            f"{', '.join(valid)}; overrides may only change existing keys - add new ones in the task config class)"
         )
 
 
@@ -290,10 +290,6 @@ def _coerce(tp: Any, value: Any, key: str, complete: bool = False) -> Any:
             return from_dict(tp, value, key, complete)
         raise _type_error(tp, value, key)
 
-    if tp is bool:
-        if isinstance(value, bool):
-            return value
-        raise _type_error(tp, value, key)
     if tp is int:
         if isinstance(value, int) and not isinstance(value, bool):
             return value
@@ -301,10 +297,6 @@ def _coerce(tp: Any, value: Any, key: str, complete: bool = False) -> Any:
     if tp is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)
-        raise _type_error(tp, value, key)
-    if tp is str or tp is type(None):
-        if isinstance(value, tp):
-            return value
         raise _type_error(tp, value, key)
 
     if tp is tuple or origin is tuple:
@@ -335,7 +327,7 @@ def _coerce(tp: Any, value: Any, key: str, complete: bool = False) -> Any:
             _coerce(key_tp, k, f"{key} (dict key)"): _coerce(val_tp, v, _join(key, k)) for k, v in value.items()
         }
 
-    if isinstance(tp, type):
+    if isinstance(tp, type):  # bool, str, None and any other plain type
         if isinstance(value, tp):
             return value
         raise _type_error(tp, value, key)
@@ -475,18 +467,21 @@ def load_yaml(cls: type, path: str | os.PathLike, complete: bool = False) -> Any
 # A rule is a callable: value -> None when allowed, else the text "what is allowed".
 
 
-def _numbers(value: Any):
-    """Every number inside a value (scalars, tuples, lists, dict values), bools excluded."""
-    if isinstance(value, bool):
-        return
-    if isinstance(value, (int, float)):
-        yield value
+def _leaves(value: Any, path: str = ""):
+    """(key, value) of every scalar inside plain config data: dict values and list or tuple items, depth first."""
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            yield from _leaves(v, _join(path, k))
     elif isinstance(value, (list, tuple)):
-        for v in value:
-            yield from _numbers(v)
-    elif isinstance(value, Mapping):
-        for v in value.values():
-            yield from _numbers(v)
+        for i, v in enumerate(value):
+            yield from _leaves(v, f"{path}[{i}]")
+    else:
+        yield path, value
+
+
+def _numbers(value: Any) -> list:
+    """Every number inside a value (scalars, tuples, lists, dict values), bools excluded."""
+    return [v for _, v in _leaves(value) if isinstance(v, (int, float)) and not isinstance(v, bool)]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -552,30 +547,13 @@ def _lookup(data: Any, key: str) -> Any:
     return data
 
 
-def _non_finite(data: Any, path: str) -> tuple[str, float] | None:
-    """(key, value) of the first NaN or infinity in plain config data."""
-    if isinstance(data, float) and not math.isfinite(data):
-        return path, data
-    if isinstance(data, Mapping):
-        children = [(_join(path, k), v) for k, v in data.items()]
-    elif isinstance(data, list):
-        children = [(f"{path}[{i}]", v) for i, v in enumerate(data)]
-    else:
-        return None
-    for child_path, value in children:
-        found = _non_finite(value, child_path)
-        if found:
-            return found
-    return None
-
-
 def check_values(cfg: Any, rules: Mapping[str, Any], prefix: str = "") -> None:
     """Every float finite and every ``rules[key]`` satisfied, else a one-line ConfigError naming the key.
 
     ``prefix`` is put before key names in messages (``train.`` for the train config).
     """
     data = to_dict(cfg)
-    found = _non_finite(data, "")
+    found = next(((k, v) for k, v in _leaves(data) if isinstance(v, float) and not math.isfinite(v)), None)
     if found:
         raise ConfigError(f"config key '{prefix}{found[0]}' is {found[1]}; allowed: a finite number")
     for key, rule in rules.items():
