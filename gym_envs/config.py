@@ -370,16 +370,10 @@ def _child_type(obj: Any, obj_tp: Any, key: str, path: str, full_key: str) -> An
 def _assign(parent: Any, key: str, tp: Any, value: Any, path: str) -> None:
     """Set ``parent.key`` (or ``parent[key]``); a mapping value merges into a section / non-empty dict."""
     current = parent.get(key) if isinstance(parent, dict) else getattr(parent, key)
-    if isinstance(value, Mapping) and dataclasses.is_dataclass(current):
+    if isinstance(value, Mapping) and (dataclasses.is_dataclass(current) or (isinstance(current, dict) and current)):
         for sub_key, sub_value in value.items():
-            sub_key = str(sub_key)
-            sub_tp = _child_type(current, type(current), sub_key, path, _join(path, sub_key))
-            _assign(current, sub_key, sub_tp, sub_value, _join(path, sub_key))
-        return
-    if isinstance(value, Mapping) and isinstance(current, dict) and current:
-        for sub_key, sub_value in value.items():
-            _check_dict_key(current, sub_key, path)
-            _assign(current, sub_key, _dict_value_type(tp), sub_value, _join(path, sub_key))
+            sub_path = _join(path, sub_key)
+            _assign(current, sub_key, _child_type(current, tp, sub_key, path, sub_path), sub_value, sub_path)
         return
     new_value = _coerce(tp, value, path)
     if isinstance(parent, dict):
