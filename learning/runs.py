@@ -134,11 +134,6 @@ def check_not_in_use(folder: str, fix: str) -> None:
 # --- creating runs ----------------------------------------------------------------------------
 
 
-def run_folder_name(run_name: str, now: datetime.datetime | None = None) -> str:
-    stamp = (now or datetime.datetime.now()).strftime(_TIMESTAMP_FORMAT)
-    return f"{stamp}_{run_name}" if run_name else stamp
-
-
 def check_folder_names(experiment: str, run_name: str) -> None:
     if not experiment:
         raise RunError("the experiment name is empty")
@@ -152,7 +147,8 @@ def create_run_dir(log_root: str, experiment: str, run_name: str) -> str:
     check_folder_names(experiment, run_name)
     parent = os.path.join(log_root, experiment)
     os.makedirs(parent, exist_ok=True)
-    base = run_folder_name(run_name)
+    stamp = datetime.datetime.now().strftime(_TIMESTAMP_FORMAT)
+    base = f"{stamp}_{run_name}" if run_name else stamp
     for suffix in range(1, 1000):
         path = os.path.join(parent, base if suffix == 1 else f"{base}-{suffix}")
         try:
@@ -172,12 +168,7 @@ def checkpoint_path(run_dir: str, iteration: int) -> str:
 
 def list_checkpoints(run_dir: str) -> list[int]:
     """Iterations of the model_<it>.pt files in run_dir, ascending."""
-    found = []
-    for name in os.listdir(run_dir):
-        m = _CHECKPOINT_RE.match(name)
-        if m:
-            found.append(int(m.group(1)))
-    return sorted(found)
+    return sorted(int(m.group(1)) for m in map(_CHECKPOINT_RE.match, os.listdir(run_dir)) if m)
 
 
 def checkpoint_iteration(path: str) -> int:
@@ -425,6 +416,7 @@ def find_run(
     every experiment); None or '-1' takes the newest run (that has a checkpoint) matching the
     experiment, task and ORC filters.
     """
+    where = os.path.join(log_root, experiment) if experiment else log_root
     if load_run and load_run != "-1":
         if os.path.isdir(load_run):
             if not is_run_dir(load_run):
@@ -433,7 +425,6 @@ def find_run(
         candidates = [r for r in list_runs(log_root, experiment) if r.name == load_run]
         if len(candidates) == 1:
             return candidates[0].path
-        where = os.path.join(log_root, experiment) if experiment else log_root
         if len(candidates) > 1:
             raise RunError(
                 f"run {load_run!r} exists in several experiments under {where} "
@@ -456,7 +447,6 @@ def find_run(
                 raise RunError(f"the newest run {r.path} cannot be read ({why}); fix or remove it, or choose a run "
                                f"with --load_run")
     if not matching:
-        where = os.path.join(log_root, experiment) if experiment else log_root
         wanted = " ".join(f for f in (f"task={task}" if task else "", f"orc={orc}" if orc else "") if f)
         raise RunError(
             f"no run with a checkpoint under {where}" + (f" for {wanted}" if wanted else "")
@@ -638,12 +628,10 @@ def load_policy(run_dir: str, checkpoint: int = -1, device: str | torch.device =
                               f"task {task} as configured", cause)
     in_dim, num_actions = model_io_dims(data["actor_state_dict"])
     rsl = to_rsl_rl_dict(train_cfg)
-    groups = rsl["obs_groups"]["actor"]
     # Dummy observations only size the model: all inputs in the first group, the others empty.
-    widths = {g: (in_dim if i == 0 else 0) for i, g in enumerate(groups)}
-    obs = TensorDict({g: torch.zeros(1, w) for g, w in widths.items()}, batch_size=[1])
-    actor_cfg = dict(rsl["actor"])
-    actor_cfg.pop("class_name")
+    obs = TensorDict({g: torch.zeros(1, in_dim if i == 0 else 0) for i, g in enumerate(rsl["obs_groups"]["actor"])},
+                     batch_size=[1])
+    actor_cfg = {key: value for key, value in rsl["actor"].items() if key != "class_name"}
     model = MLPModel(obs, rsl["obs_groups"], "actor", num_actions, **actor_cfg).to(device)
     check_layer_shapes(data, path, {"actor_state_dict": model}, f"the actor of {os.path.join(run_dir, TRAIN_YAML)}")
     model.load_state_dict(data["actor_state_dict"])
