@@ -144,20 +144,11 @@ def play_overrides(env_cfg, args) -> list[str]:
     )
     if (args.osc_init or args.coupling or args.orc) and not has_osc:
         raise ConfigError("--osc_init, --coupling and --orc need a task with oscillators")
-    if args.osc_init:
-        items.append(f"osc.init={args.osc_init}")
     if args.coupling == "off":
         items.append("osc.coupling_max=0.0")
-    if args.orc:
-        items.append(f"osc.orc={args.orc}")
-    if args.seed is not None:
-        items.append(f"env.seed={args.seed}")
-    if args.sim:
-        items.append(f"sim.backend={args.sim}")
-    if args.num_threads is not None:
-        items.append(f"sim.num_threads={args.num_threads}")
-    items.append(f"env.device={args.device}")
-    return items
+    given = {"osc.init": args.osc_init, "osc.orc": args.orc, "env.seed": args.seed, "sim.backend": args.sim,
+             "sim.num_threads": args.num_threads, "env.device": args.device}
+    return items + [f"{key}={value}" for key, value in given.items() if value is not None]
 
 
 @dataclass
