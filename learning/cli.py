@@ -190,19 +190,15 @@ def run(parser: Parser, body: Callable[[argparse.Namespace], int | None], argv: 
         return int(done.code or 0)
     try:
         return body(args) or 0
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Exception) as err:  # noqa: BLE001 - the one place that turns any failure into a line
         if args.debug:
             raise
-        print(f"\n{parser.prog}: interrupted; stopped without saving", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except input_errors() as err:
-        if args.debug:
-            raise
-        print(f"{parser.prog}: error: {one_line(err)}", file=sys.stderr)
-        return EXIT_ERROR
-    except Exception as err:  # noqa: BLE001 - the one place that turns any failure into a line
-        if args.debug:
-            raise
-        print(f"{parser.prog}: error: {type(err).__name__}: {one_line(err)} (unexpected; --debug shows the "
-              f"traceback)", file=sys.stderr)
+        if isinstance(err, KeyboardInterrupt):
+            print(f"\n{parser.prog}: interrupted; stopped without saving", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        if isinstance(err, input_errors()):
+            print(f"{parser.prog}: error: {one_line(err)}", file=sys.stderr)
+        else:
+            print(f"{parser.prog}: error: {type(err).__name__}: {one_line(err)} (unexpected; --debug shows the "
+                  f"traceback)", file=sys.stderr)
         return EXIT_ERROR
