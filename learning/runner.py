@@ -37,11 +37,9 @@ from learning.runner_config import to_rsl_rl_dict
 from learning.vec_env import TaskVecEnv
 
 
-@contextlib.contextmanager
-def quiet():
+def quiet() -> contextlib.redirect_stdout:
     """Silence rsl-rl's prints (model summaries, observation-set tables, per-iteration blocks)."""
-    with contextlib.redirect_stdout(io.StringIO()):
-        yield
+    return contextlib.redirect_stdout(io.StringIO())
 
 
 class StopRequest:

@@ -305,7 +305,7 @@ class MujocoWarpBackend(MujocoModelBackend):
         print(self.graph_status, flush=True)
         self._graphs: dict[int, object] = {}
         self._stepped_eagerly: set[int] = set()
-        self._reset_all_to_home()
+        self._reset_to_home(torch.arange(self.num_envs, device=self._view_device))
 
     @property
     def num_threads(self) -> int:
@@ -482,9 +482,6 @@ class MujocoWarpBackend(MujocoModelBackend):
                 outputs=[self._termination],
             )
 
-    def _reset_all_to_home(self) -> None:
-        self._reset_to_home(torch.arange(self.num_envs, device=self._view_device))
-
     def _set_const(self) -> None:
         with self._warp_work():
             mjw.set_const(self.warp_model, self.warp_data, groups=mjw.SetConstGroup.FIXED | mjw.SetConstGroup.INERT0)
@@ -572,10 +569,7 @@ def _constraint_capacity(model: mujoco.MjModel) -> tuple[int, int]:
                 ncon += _OTHER_PAIR_CONTACTS
     ncon += _OTHER_PAIR_CONTACTS * m.npair
     condim = int(m.geom_condim.max(initial=1))
-    if m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL:
-        rows_per_contact = max(1, 2 * (condim - 1))
-    else:
-        rows_per_contact = condim
+    rows_per_contact = max(1, 2 * (condim - 1)) if m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL else condim
     rows = ncon * rows_per_contact + int(m.jnt_limited.sum()) + int(m.tendon_limited.sum())
     rows += int((m.dof_frictionloss > 0).sum()) + 6 * m.neq
     return max(ncon, 1), max(rows, 1)
