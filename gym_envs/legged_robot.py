@@ -164,14 +164,8 @@ class LeggedRobot:
 
     def _init_reward_terms(self) -> None:
         self.reward_weights = {k: w for k, w in self.cfg.rewards.weights.items() if w != 0.0}
-        self.reward_functions = {}
-        for name in self.reward_weights:
-            fn = getattr(self, f"_reward_{name}", None)
-            if fn is None:
-                known = sorted(a[len("_reward_") :] for a in dir(self) if a.startswith("_reward_"))
-                raise ConfigError(f"rewards.weights has {name!r} but {type(self).__name__} has no _reward_{name}; "
-                                  f"known terms: {', '.join(known)}")
-            self.reward_functions[name] = fn
+        self.reward_functions = {name: self._term("reward", name, "rewards.weights has")
+                                 for name in self.reward_weights}
         self.episode_sums = {name: torch.zeros(self.num_envs, device=self.device) for name in self.reward_weights}
         self.tracking_error_sum = torch.zeros(self.num_envs, device=self.device)  # of |command_xy - v_xy| [m/s]
 
@@ -179,10 +173,7 @@ class LeggedRobot:
         obs = self.cfg.observations
         for group in ("actor", "critic"):
             for name in getattr(obs, group):
-                if not hasattr(self, f"_obs_{name}"):
-                    known = sorted(a[len("_obs_") :] for a in dir(self) if a.startswith("_obs_"))
-                    raise ConfigError(f"observations.{group} lists {name!r} but {type(self).__name__} has no "
-                                      f"_obs_{name}; known terms: {', '.join(known)}")
+                self._term("obs", name, f"observations.{group} lists")
         for table in ("scales", "noise"):
             for name in getattr(obs, table):
                 if name not in obs.actor and name not in obs.critic:
@@ -190,6 +181,15 @@ class LeggedRobot:
         # Scale and noise vectors are sized on first use, from each term's actual width.
         self._obs_scale: dict[str, torch.Tensor] = {}
         self._obs_noise: dict[str, torch.Tensor] = {}
+
+    def _term(self, kind: str, name: str, listed_in: str):
+        """The term method `_<kind>_<name>`, or a ConfigError naming the terms there are."""
+        method = getattr(self, f"_{kind}_{name}", None)
+        if method is None:
+            known = sorted(a[len(kind) + 2 :] for a in dir(self) if a.startswith(f"_{kind}_"))
+            raise ConfigError(f"{listed_in} {name!r} but {type(self).__name__} has no _{kind}_{name}; "
+                              f"known terms: {', '.join(known)}")
+        return method
 
     def _init_domain_randomisation(self) -> None:
         dr, n, gen, dev = self.cfg.domain_rand, self.num_envs, self.generator, self.device
