@@ -63,11 +63,8 @@ def pick_policies(policies, seed: int = 0) -> dict:
     """One policy per trained configuration used here, chosen at random; a) and b) share theirs."""
     rng = np.random.default_rng(seed)
     groups = group_by_orc(policies)
-    chosen = {}
-    for orc in sorted({e.orc for e in EXPERIMENTS}):
-        if groups.get(orc):
-            chosen[orc] = groups[orc][int(rng.integers(len(groups[orc])))]
-    return chosen
+    return {orc: groups[orc][int(rng.integers(len(groups[orc])))] for orc in sorted({e.orc for e in EXPERIMENTS})
+            if groups.get(orc)}
 
 
 def collect(policies, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
