@@ -234,16 +234,10 @@ def plot_scatter(panels: dict):
                        linewidths=0.4, depthshade=False, label=name if i == 0 else None)
             label_at = pts[np.argmin(np.abs(pts - math.pi).sum(axis=1))]  # the most central image
             ax.text(*label_at, f" {name}", fontsize=5.5, color="k")
-        ticks = [0, math.pi, 2 * math.pi]
-        for setter in (ax.set_xticks, ax.set_yticks, ax.set_zticks):
-            setter(ticks)
-        for setter in (ax.set_xticklabels, ax.set_yticklabels, ax.set_zticklabels):
-            setter(["0", r"$\pi$", r"$2\pi$"])
-        for setter in (ax.set_xlim, ax.set_ylim, ax.set_zlim):
-            setter(0, 2 * math.pi)
-        ax.set_xlabel(r"RPD$_{LF}$ [rad]", labelpad=-8)
-        ax.set_ylabel(r"RPD$_{RH}$ [rad]", labelpad=-8)
-        ax.set_zlabel(r"RPD$_{LH}$ [rad]", labelpad=-8)
+        for axis, leg in zip("xyz", RPD_NAMES):
+            getattr(ax, f"set_{axis}ticks")([0, math.pi, 2 * math.pi], ["0", r"$\pi$", r"$2\pi$"])
+            getattr(ax, f"set_{axis}lim")(0, 2 * math.pi)
+            getattr(ax, f"set_{axis}label")(rf"RPD$_{{{leg}}}$ [rad]", labelpad=-8)
         ax.tick_params(pad=-3)
         ax.set_title(f"{exp.title}\nfinal: {_top_gaits(res['final_labels'])}", pad=-2)
         ax.view_init(elev=22, azim=-58)
