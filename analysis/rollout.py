@@ -86,15 +86,8 @@ def group_by_orc(runs: Sequence[PolicyRun]) -> dict[str, list[PolicyRun]]:
 
 def limit_per_config(runs: Sequence[PolicyRun], max_per_config: int | None) -> list[PolicyRun]:
     """At most max_per_config runs of each ORC configuration, keeping the first ones (None: all)."""
-    if max_per_config is None:
-        return list(runs)
-    taken: dict[str, int] = {}
-    out = []
-    for run in runs:
-        if taken.get(run.orc, 0) < max_per_config:
-            taken[run.orc] = taken.get(run.orc, 0) + 1
-            out.append(run)
-    return out
+    kept = {id(run) for group in group_by_orc(runs).values() for run in group[:max_per_config]}
+    return [run for run in runs if id(run) in kept]
 
 
 class StackedPolicy:
