@@ -158,8 +158,6 @@ def render(policies, results: dict, quick: bool, settings: EvalSettings, seed: i
            started: datetime.datetime) -> str:
     groups = group_by_orc(policies)
     configs = sort_configs(groups)
-    bl, ge, pt, ob, db, fp = (results[k] for k in ("balanced_legs", "gait_emergence", "pace_to_trot", "obedience",
-                                                   "disturbance", "fixed_points"))
     minutes = (datetime.datetime.now() - started).total_seconds() / 60
     md = ["# orcgym analysis report", ""]
     if quick:
@@ -182,17 +180,16 @@ def render(policies, results: dict, quick: bool, settings: EvalSettings, seed: i
         "agreement rate.",
         "",
     ]
-    md += _section_balanced(bl)
-    md += _section_emergence(ge)
-    md += _section_pace(pt)
-    md += _section_obedience(ob)
-    md += _section_envelope(results["envelope"])
-    md += _section_disturbance(db)
-    md += _section_fixed_points(fp)
+    sections = {"balanced_legs": _section_balanced, "gait_emergence": _section_emergence, "pace_to_trot": _section_pace,
+                "obedience": _section_obedience, "envelope": _section_envelope, "disturbance": _section_disturbance,
+                "fixed_points": _section_fixed_points}
+    for key, section in sections.items():
+        md += section(results[key])
     md += ["## Files", ""]
     for name, res in results.items():
         for key, path in res.get("files", {}).items():
             md.append(f"- {name} / {key}: `{Path(path).name}`")
+    fp = results["fixed_points"]  # its files are top-level keys
     for key in ("csv", "points_csv", "png", "pdf"):
         if key in fp:
             md.append(f"- fixed_points / {key}: `{Path(fp[key]).name}`")
