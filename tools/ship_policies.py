@@ -30,6 +30,7 @@ import yaml
 from analysis import obedience
 from analysis.gait import mix_text
 from analysis.locomotion import check_locomotion
+from analysis.plotting import write_csv
 from analysis.rollout import load_policy_run
 from gym_envs.orc import PAPER_CONFIGURATIONS
 from learning import runs
@@ -118,10 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.runs and not args.machine:
         parser.error("--runs needs --machine (what trained the runs)")
     rows = remeasure(args) if args.remeasure else ship(args)
-    with open(os.path.join(args.out, "manifest.csv"), "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=FIELDS)
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(os.path.join(args.out, "manifest.csv"), FIELDS, ([row[k] for k in FIELDS] for row in rows))
     return 0
 
 
