@@ -47,17 +47,13 @@ CURVES = (
 )
 
 
-def curve_values(curve: Curve, phase: torch.Tensor) -> torch.Tensor:
-    return oscillator_velocity(phase, GRF, curve.omega, curve.sigma, curve.xi)
-
-
 def run(out_dir, quick: bool = False) -> dict:
     """Write the CSV, PNG and PDF of the figure into out_dir; return their paths and the fixed points."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n = 121 if quick else 1441  # both include 0, pi/2, pi, 3pi/2 and 2pi exactly on the grid
     phase = torch.linspace(0.0, 2.0 * math.pi, n, dtype=torch.float64, device="cpu")
-    values = {c.name: curve_values(c, phase) for c in CURVES}
+    values = {c.name: oscillator_velocity(phase, GRF, c.omega, c.sigma, c.xi) for c in CURVES}
     fps = {c.name: [(p.phase, p.stability) for p in fixed_points(GRF, c.omega, c.sigma, c.xi)] for c in CURVES}
 
     csv_path = write_csv(out / f"{FILE_STEM}.csv", ["phase_rad"] + [c.name for c in CURVES],
