@@ -18,10 +18,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # noqa: E402
 
-from gym_envs.config import load_yaml  # noqa: E402
 from gym_envs.orc import PAPER_CONFIGURATIONS  # noqa: E402
 from learning import runs  # noqa: E402
-from gym_envs.registry import train_cfg_class  # noqa: E402
 
 PANELS = (
     ("Train/mean_reward", "mean episode return"),
@@ -32,10 +30,8 @@ PANELS = (
 
 def curves(run_dir: str) -> dict[str, tuple[list[float], list[float]]]:
     """tag -> (env steps, values) over every event file of the run."""
-    train_cfg = load_yaml(train_cfg_class("mini_cheetah_osc"), os.path.join(run_dir, runs.TRAIN_YAML))
-    with open(os.path.join(run_dir, runs.ENV_YAML)) as f:
-        num_envs = next(int(line.split(":")[1]) for line in f if line.strip().startswith("num_envs:"))
-    steps_per_iteration = num_envs * train_cfg.num_steps_per_env
+    _, env_cfg, train_cfg = runs.load_run_configs(run_dir)
+    steps_per_iteration = env_cfg.env.num_envs * train_cfg.num_steps_per_env
     out: dict[str, dict[int, float]] = {tag: {} for tag, _ in PANELS}
     for path in sorted(glob.glob(os.path.join(run_dir, "events.out.tfevents.*"))):
         acc = EventAccumulator(path)
