@@ -29,6 +29,7 @@ from analysis.plotting import (
     write_csv,
 )
 from analysis.rollout import EvalSettings, Job, cli_main, run_jobs
+from analysis.stats import policy_interval
 
 import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
 
@@ -58,11 +59,21 @@ def leg_statistics(mean_grf) -> dict:
         "iqr": q75 - q25,
         "mean": g.mean(axis=0),
         "std": g.std(axis=0),
-        # The share of robots with at least one leg carrying (almost) nothing.
-        "frac_leg_near_zero": float(np.mean((g < NEAR_ZERO).any(axis=1))) if len(g) else float("nan"),
-        # Mean over robots of the largest deviation of a leg from the balanced 0.25.
-        "mean_max_deviation": float(np.mean(np.abs(g - BALANCED).max(axis=1))) if len(g) else float("nan"),
+        **{name: statistic(g) if len(g) else float("nan") for name, statistic in POLICY_STATISTICS.items()},
     }
+
+
+def frac_leg_near_zero(g: np.ndarray) -> float:
+    """The share of robots with at least one leg carrying (almost) nothing."""
+    return float(np.mean((g < NEAR_ZERO).any(axis=1)))
+
+
+def mean_max_deviation(g: np.ndarray) -> float:
+    """Mean over robots of the largest deviation of a leg from the balanced 0.25."""
+    return float(np.mean(np.abs(g - BALANCED).max(axis=1)))
+
+
+POLICY_STATISTICS = {"frac_leg_near_zero": frac_leg_near_zero, "mean_max_deviation": mean_max_deviation}
 
 
 def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
@@ -97,6 +108,13 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     falls = {c: sum(r["fell"] for r in rows if r["config"] == c) for c in configs}
     n_policies = {c: len({r["run"] for r in rows if r["config"] == c}) for c in configs}
     stats = {c: leg_statistics(pooled[c]) for c in configs}
+    # The same two statistics per policy, and their 95 % interval over policies (robots resampled within them).
+    per_policy = {c: [np.array([[r[leg] for leg in LEG_NAMES] for r in rows if r["run"] == name])
+                      for name in dict.fromkeys(r["run"] for r in rows if r["config"] == c)] for c in configs}
+    for c in configs:
+        stats[c]["policy_max_deviation"] = [mean_max_deviation(g) for g in per_policy[c]]
+        for name, statistic in POLICY_STATISTICS.items():
+            stats[c][f"{name}_interval"] = policy_interval(per_policy[c], statistic)
 
     spreads = ("median", "iqr")
     summary_csv = write_csv(

@@ -112,12 +112,20 @@ def test_paper_table_keeps_the_papers_numbers_and_bold():
     assert lines[-1].endswith("| **7.4 ± 4.0** |")
 
 
-def test_table_claims_read_our_numbers():
-    stats = {c: {3.0: (m, 0.0, 10), 3.5: (m + 5, 0.0, 10)} for c, m in
-             {"100": 20.0, "101": 18.0, "010": 4.0, "011": 3.0, "111": 2.0}.items()}
-    claims = report.table_claims(stats)
-    assert any(c.startswith("ORC(111) lowest at 3 m/s (paper: yes): yes") for c in claims)
-    assert any("at 3.5 m/s (paper: yes): yes; 8.5 % vs 24.0 %" in c for c in claims)
+def test_table_claims_hold_only_where_a_permutation_test_over_policies_says_so():
+    def rates(policies, spread=0.1):
+        return {c: {3.0: [m + spread * k for k in range(policies)], 3.5: [m + 5 + spread * k for k in range(policies)]}
+                for c, m in {"100": 20.0, "101": 18.0, "010": 4.0, "011": 3.0, "111": 2.0}.items()}
+    claims = report.table_claims(rates(4))
+    assert any(c.startswith("ORC(111) lowest at 3 m/s (paper: yes): yes (p = 0.014; 4 vs 4 policies)") for c in claims)
+    assert any("at 3.5 m/s (paper: yes): yes (p < 0.001; 8 vs 8 policies); 8.7 % vs 24.1 %" in c for c in claims)
+    # One policy per configuration: the means still go the paper's way, but nothing is shown.
+    claims = report.table_claims(rates(1))
+    assert any(c.startswith("ORC(111) lowest at 3 m/s (paper: yes): not shown (p = 0.500; 1 vs 1 policies)")
+               for c in claims)
+    flipped = rates(4)
+    flipped["111"][3.0] = [30.0, 31.0, 32.0, 33.0]
+    assert any(c.startswith("ORC(111) lowest at 3 m/s (paper: yes): no") for c in report.table_claims(flipped))
 
 
 # --- balanced legs --------------------------------------------------------------------------------
