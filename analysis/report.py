@@ -307,7 +307,10 @@ def _section_obedience(ob: dict) -> list[str]:
                            "falls"], rows), ""]
     regular = {}  # per configuration, the per-policy shares of robots in a regular gait at 10 s under σ = 1
     for r in ob["results"]:
-        regular.setdefault(r.orc, []).append((r.settling.regular_at_10s, r.settling.robots))
+        if np.isfinite(r.settling.regular_at_10s):  # NaN: a rollout shorter than 10 s
+            regular.setdefault(r.orc, []).append((r.settling.regular_at_10s, r.settling.robots))
+    if not regular:
+        return md
     md += ["σ = 1, share of robots in a regular gait at 10 s, mean over policies [95 % interval, policies and "
            "robots resampled]: " + "; ".join(
                f"ORC({c}) " + stats.interval_text(*stats.policy_interval([stats.shares(*x) for x in v]), scale=100,
