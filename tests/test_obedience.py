@@ -44,6 +44,14 @@ def test_a_pronker_obeys_only_pronk():
         assert res.stance_share == pytest.approx(0.5, abs=0.02)  # half its load lands in swing
 
 
+def test_stepping_in_place_earns_the_label_but_does_not_walk():
+    for speed, walking in ((0.05, 0.0), (0.6, 1.0)):
+        started = {g: obedience.started_gait_result(synthetic_rollout(IDEAL_GAITS[g], speed=speed), g)
+                   for g in obedience.STARTED_GAITS}
+        assert all(s.obeyed == 1.0 and s.walking == walking for s in started.values())
+        assert obedience.Obedience("p", "111", started).obeys() == bool(walking)
+
+
 def test_robots_alike_is_decided_by_their_samples_not_their_records():
     r = synthetic_rollout(IDEAL_GAITS["trot"])
     assert not obedience.started_gait_result(r, "trot").identical

@@ -7,7 +7,9 @@ For each checkpoint (all checkpoints batched together, 16 robots per measurement
   - the command envelope (analysis.envelope): every command of ENVELOPE at the trained coupling from
     random phases, 8 s after a 2 s start; how many commands are met (each axis within 0.25, no falls);
   - obedience (analysis.obedience): sigma = 0, oscillators started in trot / pace / bound / pronk at
-    1 m/s, share walking that gait at 10 s; sigma = 1 from random phases, share regular at 10 s.
+    1 m/s, share walking that gait at 10 s; sigma = 1 from random phases, share regular at 10 s;
+  - the verdict on both goals: every envelope command met, and Obedience.obeys (each started gait
+    walked at half the command's speed or more by 80 % of the robots, 80 % regular at 10 s, no falls).
 One summary line per checkpoint on stdout, then every envelope line.
 """
 
@@ -45,7 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     for policy, ob in zip(policies, obeyed):
         rows = [r for r in env_results if r.policy == policy.name]
         missed = [f"{r.name} ({max(r.error):.2f}{', falls' if r.falls else ''})" for r in rows if not r.met]
-        print(f"{policy.name} | envelope met {len(rows) - len(missed)}/{len(rows)}"
+        verdict = f"envelope {'yes' if not missed else 'no'}, obedience {'yes' if ob.obeys() else 'no'}"
+        print(f"{policy.name} | goals: {verdict} | envelope met {len(rows) - len(missed)}/{len(rows)}"
               f"{' | missed: ' + '; '.join(missed) if missed else ''} | {ob.summary()}", flush=True)
     print("\n".join(envelope.summary_lines(env_results)))
     return 0
