@@ -152,6 +152,19 @@ class LeggedRobot:
         self.extras: dict = {}
         self._update_state(self.sim.read_state())
 
+    def continue_from_step(self, step: int) -> None:
+        """Continue a run whose policy has trained `step` control steps per env: the step counter (push
+        timing, reward stage) resumes there instead of at 0."""
+        self.common_step_counter = step
+        self._update_reward_stage()
+
+    def _update_reward_stage(self) -> None:
+        stage = self.cfg.rewards.second_stage
+        if self.reward_stage == 1 and stage.start_step and self.common_step_counter >= stage.start_step:
+            self.reward_weights.update(stage.weights)
+            self.tracking_error_form = stage.tracking_error or self.tracking_error_form
+            self.reward_stage = 2
+
     def _per_joint(self, values, name: str) -> torch.Tensor:
         """Expand one value, one per joint of a leg, or one per joint, to (num_joints,)."""
         v = torch.as_tensor(values, dtype=torch.float32, device=self.device).flatten()
@@ -163,9 +176,14 @@ class LeggedRobot:
         raise ConfigError(f"{name} has {v.numel()} values; give 1, one per joint of a leg ({per_leg}), or {j}")
 
     def _init_reward_terms(self) -> None:
-        self.reward_weights = {k: w for k, w in self.cfg.rewards.weights.items() if w != 0.0}
+        rewards = self.cfg.rewards
+        later = rewards.second_stage.weights if rewards.second_stage.start_step else {}
+        # A term weighted in either stage is resolved now, so that the switch builds nothing.
+        self.reward_weights = {k: w for k, w in rewards.weights.items() if w != 0.0 or later.get(k, 0.0) != 0.0}
         self.reward_functions = {name: self._term("reward", name, "rewards.weights has")
                                  for name in self.reward_weights}
+        self.tracking_error_form = rewards.tracking_error
+        self.reward_stage = 1
         self.episode_sums = {name: torch.zeros(self.num_envs, device=self.device) for name in self.reward_weights}
         self.tracking_error_sum = torch.zeros(self.num_envs, device=self.device)  # of |command_xy - v_xy| [m/s]
 
@@ -225,6 +243,7 @@ class LeggedRobot:
     def _post_physics_step(self, state: SimState, diverged: torch.Tensor) -> None:
         self.episode_length_buf += 1
         self.common_step_counter += 1
+        self._update_reward_stage()
         self._update_state(state)
         self._after_physics()
         # Index lists (a host sync each on CUDA) only where they size random draws: a draw per chosen

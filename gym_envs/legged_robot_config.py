@@ -10,7 +10,7 @@ import os
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from gym_envs.config import Check, OneOf, Ordered, Range, check_values
+from gym_envs.config import Check, ConfigError, OneOf, Ordered, Range, check_values
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -76,6 +76,18 @@ class ObservationsCfg:
 
 
 @dataclass
+class RewardStageCfg:
+    """Reward settings that take over once the env has run `start_step` control steps (its
+    common_step_counter; a PPO iteration is train.num_steps_per_env of them, and a resumed run starts
+    the counter at the checkpoint's iteration): a two-stage reward curriculum, e.g. absolute tracking
+    errors and stronger phase rewards once the policy walks (docs/recipe-study.md, E25-E27)."""
+
+    start_step: int = 0  # 0: no second stage
+    weights: dict[str, float] = field(default_factory=dict)  # replace these entries of rewards.weights
+    tracking_error: str = ""  # '' keeps rewards.tracking_error
+
+
+@dataclass
 class RewardsCfg:
     """weights[name] multiplies the task's _reward_<name>; the sum is scaled by the control dt."""
 
@@ -90,6 +102,7 @@ class RewardsCfg:
     # costs a sixteenth of the same shortfall at rest; 'absolute' holds every command to one width.
     tracking_error: str = "relative"
     base_height_target: float = 0.33
+    second_stage: RewardStageCfg = field(default_factory=RewardStageCfg)
 
 
 @dataclass
@@ -172,6 +185,8 @@ class LeggedRobotCfg:
         "init_state.mode": OneOf(("range", "default")),
         "rewards.yaw_tracking": OneOf(("sqexp", "released_quartic")),
         "rewards.tracking_error": OneOf(("relative", "absolute")),
+        "rewards.second_stage.start_step": Range(0),
+        "rewards.second_stage.tracking_error": OneOf(("", "relative", "absolute")),
         "init_state.base_height": POSITIVE,
         "init_state.lin_vel_x": Ordered(),
         "init_state.lin_vel_y": Ordered(),
@@ -200,3 +215,9 @@ class LeggedRobotCfg:
     def validate(self) -> None:
         """Raise a one-line ConfigError for the first value outside its RULES (or not finite)."""
         check_values(self, self.RULES)
+        unknown = [name for name in self.rewards.second_stage.weights if name not in self.rewards.weights]
+        if unknown:
+            raise ConfigError(
+                f"config key 'rewards.second_stage.weights.{unknown[0]}' names no entry of rewards.weights; "
+                f"allowed: {', '.join(self.rewards.weights)}"
+            )

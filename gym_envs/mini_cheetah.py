@@ -82,7 +82,7 @@ class MiniCheetah(LeggedRobot):
         return torch.exp(-torch.square(x) / self.cfg.rewards.tracking_sigma)
 
     def _tracking_error(self, command, measured):
-        if self.cfg.rewards.tracking_error == "absolute":
+        if self.tracking_error_form == "absolute":
             return command - measured
         return (command - measured) / (1.0 + command.abs())
 

@@ -47,6 +47,9 @@ class OscillatorCfg:
     # How those episodes start their oscillators ('any_gait': one of the four ideal gaits, so the rarely
     # held ones, pace above all, get a fair share of the uncoupled data); coupled episodes use `init`.
     uncoupled_init: str = "random"
+    # With 'any_gait': relative weights of trot, pace, bound, pronk (oscillators.GAIT_NAMES); empty draws
+    # them uniformly. Coupled episodes mostly trot already, so a weight moves data to the gaits seldom held.
+    uncoupled_gait_weights: tuple[float, ...] = ()
     stand_threshold: float = 0.5  # a standing speed (standing_rule) below this uses the standing parameters
     standing_rule: str = "lin_vel_x"  # one of gym_envs.oscillators.STANDING_RULES
     # Quirk switches of the released code, off by default:
@@ -66,6 +69,12 @@ class MiniCheetahOscCfg(MiniCheetahCfg):
         "osc.coupling_max": NON_NEGATIVE,
         "osc.coupling_off_prob": SHARE,
         "osc.uncoupled_init": OneOf(oscillators.PHASE_INIT_MODES),
+        "osc.uncoupled_gait_weights": (
+            NON_NEGATIVE,
+            Check(lambda w: not w or (len(w) == len(oscillators.GAIT_NAMES) and sum(w) > 0),
+                  f"empty (uniform) or {len(oscillators.GAIT_NAMES)} weights for "
+                  f"{', '.join(oscillators.GAIT_NAMES)} with a positive sum"),
+        ),
         "osc.stand_threshold": NON_NEGATIVE,
         "osc.standing_rule": OneOf(oscillators.STANDING_RULES),
         "osc.grf_normaliser_mass": NON_NEGATIVE,
@@ -146,7 +155,10 @@ def apply_orc(cfg: MiniCheetahOscCfg) -> MiniCheetahOscCfg:
         obs.actor = tuple(t for t in obs.actor if t not in OSCILLATOR_OBSERVATIONS)
         obs.critic = tuple(t for t in obs.critic if t not in OSCILLATOR_OBSERVATIONS)
     if not orc.rewards:
-        cfg.rewards.weights = {k: (0.0 if k in PHASE_REWARDS else w) for k, w in cfg.rewards.weights.items()}
+        for weights in (cfg.rewards.weights, cfg.rewards.second_stage.weights):
+            for name in PHASE_REWARDS:
+                if name in weights:
+                    weights[name] = 0.0
     return cfg
 
 
@@ -213,7 +225,8 @@ class MiniCheetahOsc(MiniCheetah):
             if self.cfg.osc.uncoupled_init != self.cfg.osc.init:
                 uncoupled = env_ids[self.coupling_on[env_ids, 0] == 0.0]
                 self.phase[uncoupled] = oscillators.initial_phases(
-                    len(uncoupled), self.cfg.osc.uncoupled_init, generator=self.generator, device=self.device
+                    len(uncoupled), self.cfg.osc.uncoupled_init, generator=self.generator, device=self.device,
+                    gait_weights=self.cfg.osc.uncoupled_gait_weights or None,
                 )
 
     def _log_episodes(self, env_ids: torch.Tensor) -> None:

@@ -180,12 +180,14 @@ def initial_phases(
     generator: torch.Generator | None = None,
     device=None,
     dtype: torch.dtype = torch.float32,
+    gait_weights: tuple[float, ...] | None = None,
 ) -> torch.Tensor:
     """Initial phases (num_envs, 4) in [0, 2*pi).
 
     'random': i.i.d. U[0, 2*pi) per leg. 'trot'/'pace'/'bound'/'pronk': a random common phase for
     RF plus the ideal relative phases (phi_j = phi_RF - RPD_j). 'any_gait': each robot one of those
-    four, uniformly. 'standing': all legs at 3*pi/2.
+    four, uniformly, or in proportion to gait_weights (one per GAIT_NAMES entry). 'standing': all
+    legs at 3*pi/2.
     """
     if mode not in PHASE_INIT_MODES:
         raise ValueError(f"unknown phase init mode {mode!r}; valid modes: {', '.join(PHASE_INIT_MODES)}")
@@ -197,7 +199,12 @@ def initial_phases(
         phase = TWO_PI * torch.rand((num_envs, 4), dtype=dtype, device=draw_device, generator=generator)
     else:
         ideal = torch.tensor([(0.0,) + IDEAL_RPD[g] for g in GAIT_NAMES], dtype=dtype, device=draw_device)
-        if mode == "any_gait":
+        if mode == "any_gait" and gait_weights is not None:
+            cdf = torch.cumsum(torch.tensor(gait_weights, dtype=dtype, device=draw_device), 0)
+            draw = cdf[-1] * torch.rand(num_envs, dtype=dtype, device=draw_device, generator=generator)
+            which = torch.searchsorted(cdf, draw, right=True).clamp(max=len(GAIT_NAMES) - 1)
+            rel = ideal[which]
+        elif mode == "any_gait":
             which = torch.randint(len(GAIT_NAMES), (num_envs,), generator=generator, device=draw_device)
             rel = ideal[which]
         else:

@@ -204,6 +204,7 @@ def start_run(plan: Plan, run_dir: str | None = None, lock_fix: str = NEW_FOLDER
                 f"checkpoint {plan.resume_from} records iteration {runner.current_learning_iteration}, at or past "
                 f"train.max_iterations {train_cfg.max_iterations}; pass --max_iterations N to train N more"
             )
+        env.task.continue_from_step(runner.current_learning_iteration * train_cfg.num_steps_per_env)
     if plan.video is not None and plan.rank == 0:
         from learning.video import TrainingVideo
 

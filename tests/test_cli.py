@@ -85,6 +85,23 @@ def test_resume_continues_the_iteration_count_in_a_new_run(trained, tmp_path, ca
     assert _scalars(new, "Perf/env_steps_per_s") == [2, 3]
 
 
+def test_a_resumed_run_continues_its_reward_schedule_where_the_checkpoint_left_it(trained, tmp_path, capsys):
+    from learning import launch
+
+    _, run = trained  # two iterations of 8 steps per robot
+    for start_step, stage in ((16, 2), (17, 1)):
+        stage_overrides = [f"rewards.second_stage.start_step={start_step}", "rewards.second_stage.weights={swing_grf: 9.0}"]
+        plan = launch.resolve(launch.RunRequest(resume=True, load_run=run, log_root=str(tmp_path / str(start_step)),
+                                                max_iterations=1, num_threads=1, overrides=stage_overrides))
+        runner, _, lock = launch.start_run(plan)
+        lock.release()
+        task = runner.env.task
+        assert (task.common_step_counter, task.reward_stage) == (16, stage)
+        assert task.reward_weights["swing_grf"] == (9.0 if stage == 2 else 5.0)
+    assert run_train(tmp_path / "new", "--max_iterations", "1", "--set", "rewards.second_stage.start_step=20") == 0
+    assert "rewards: second stage from iteration 3 (no change)" in capsys.readouterr().out
+
+
 def test_same_seed_same_weights_other_seed_other_weights(trained, tmp_path):
     _, run = trained
     assert run_train(tmp_path, "--max_iterations", "2", "--seed", "1") == 0

@@ -291,6 +291,16 @@ def test_initial_phases_modes(mode):
         assert phase[:, 0].std() > 1.5  # the common offset is random
 
 
+def test_any_gait_draws_the_gaits_in_proportion_to_their_weights():
+    phase = initial_phases(4000, "any_gait", generator=torch.Generator().manual_seed(0), gait_weights=(0.0, 1.0, 3.0, 0.0))
+    rpd = torch.remainder(phase[:, :1] - phase[:, 1:], TWO_PI)
+    errors = torch.stack([_wrapped_error(rpd, torch.tensor(ideal)).amax(dim=1) for ideal in _IDEAL.values()], dim=1)
+    shares = torch.bincount(errors.argmin(dim=1), minlength=4) / 4000.0
+    assert shares[0] == 0.0 and shares[3] == 0.0  # trot and pronk weigh nothing
+    assert shares[2].item() == pytest.approx(0.75, abs=0.03)
+    assert initial_phases(0, "any_gait", gait_weights=(1.0, 1.0, 3.0, 1.0)).shape == (0, 4)
+
+
 def test_initial_phases_unknown_mode():
     with pytest.raises(ValueError, match="gallop") as info:
         initial_phases(4, "gallop")

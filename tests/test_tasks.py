@@ -214,6 +214,26 @@ def test_absolute_tracking_errors_hold_a_fast_command_to_the_width_of_a_slow_one
     assert lin == pytest.approx([math.exp(-(0.3**2) / 0.25)] * 2) and yaw == pytest.approx(lin)
 
 
+def test_the_second_reward_stage_takes_over_at_its_step_and_obeys_the_orc():
+    stage = ["rewards.second_stage.start_step=3", "rewards.second_stage.tracking_error=absolute",
+             "rewards.second_stage.weights={swing_grf: 10.0, cursorial: 0.5}", "rewards.weights.cursorial=0.0"]
+    env = quiet_standing(2, overrides_extra=stage)
+    assert env.reward_weights["cursorial"] == 0.0 and "cursorial" in env.reward_functions  # resolved for stage 2
+    for _ in range(2):
+        env.step(torch.zeros(2, env.num_actions))
+    assert (env.reward_stage, env.tracking_error_form, env.reward_weights["swing_grf"]) == (1, "relative", 5.0)
+    env.step(torch.zeros(2, env.num_actions))
+    assert (env.reward_stage, env.tracking_error_form) == (2, "absolute")
+    assert (env.reward_weights["swing_grf"], env.reward_weights["cursorial"], env.reward_weights["stance_grf"]) == (10.0, 0.5, 5.0)
+    without_phase_rewards = quiet_standing(2, overrides_extra=stage, orc="101")
+    without_phase_rewards.continue_from_step(3)  # a resumed run enters the stage at once
+    assert without_phase_rewards.reward_stage == 2 and without_phase_rewards.reward_weights["swing_grf"] == 0.0
+    with pytest.raises(ConfigError, match=r"'rewards.second_stage.weights.swing' names no entry of rewards.weights"):
+        apply_overrides(MiniCheetahOscCfg(), ["rewards.second_stage.weights={swing: 1.0}"]).validate()
+    with pytest.raises(ConfigError, match="osc.uncoupled_gait_weights"):
+        apply_overrides(MiniCheetahOscCfg(), ["osc.uncoupled_gait_weights=[1.0, 2.0]"]).validate()
+
+
 def test_the_standing_schedule_reads_the_whole_command_when_asked():
     commands = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, -1.5], [0.0, 0.5, 0.0], [1.0, 0.0, 0.0]])
     for rule, standing in (("lin_vel_x", [True, True, True, False]), ("command", [True, False, False, False])):
