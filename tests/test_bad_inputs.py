@@ -26,6 +26,8 @@ ANALYSIS = {"analysis.report": report, "analysis.balanced_legs": balanced_legs,
             "analysis.pace_to_trot": pace_to_trot, "analysis.obedience": obedience}
 # Provenance keys: any string is a valid value, and setting them changes nothing.
 NO_BAD_VALUE = {"train.profile", "train.resumed_from"}
+# Keys whose default (empty) gives the generic cases nothing to shape a bad value from.
+BAD_VALUES_OF = {"osc.uncoupled_gait_weights": ["3", "[1.0, 2.0]", "[-1.0, 1.0, 1.0, 1.0]", "[0.0, 0.0, 0.0, 0.0]"]}
 
 
 @pytest.fixture
@@ -211,6 +213,8 @@ def against_rule(rule, value) -> list:
 
 def bad_values(key, value, rules) -> list[str]:
     """Override texts that must be refused: the wrong type, non-finite floats, and values outside the rule."""
+    if key in BAD_VALUES_OF:
+        return BAD_VALUES_OF[key]
     if isinstance(value, bool):
         texts = ["maybe"]
     elif isinstance(value, int):
@@ -219,6 +223,8 @@ def bad_values(key, value, rules) -> list[str]:
         texts = ["x", ".nan", ".inf"]
     elif isinstance(value, list):
         texts = ["3"] + (["[.nan]"] if value and isinstance(value[0], float) else [])
+    elif isinstance(value, dict):  # an empty one (others are walked into): not a mapping, or a name it cannot hold
+        texts = ["3", "{no_such_name: 1.0}"]
     else:
         texts = []
     rule = rule_of(key, rules)
