@@ -109,7 +109,7 @@ def _forward_velocity(rollout) -> np.ndarray:
     return rollout.data["base_lin_vel"][:, -window:, 0].mean(axis=1)
 
 
-def started_gait_result(rollout, started: str) -> StartedGait:
+def started_gait_result(rollout, started: str, command: float = COMMAND) -> StartedGait:
     grf, phase = rollout.data["grf"], rollout.data["phase"]
     contact = gait.rpd_timeseries(grf, dt=rollout.dt)
     by_phase = gait.rpd_timeseries(phase, dt=rollout.dt, method="phase")
@@ -119,7 +119,7 @@ def started_gait_result(rollout, started: str) -> StartedGait:
         gait=started,
         robots=len(grf),
         obeyed=float(np.mean(final == started)),
-        walking=float(np.mean((final == started) & (velocity >= WALKING_FRACTION * COMMAND))),
+        walking=float(np.mean((final == started) & (velocity >= WALKING_FRACTION * command))),
         contact_mix={g: float(np.mean(final == g)) for g in gait.GAIT_LABELS},
         phase_agreement=float(gait.agreement(final, by_phase.labels[:, -1])),
         velocity=float(velocity.mean()),
@@ -142,7 +142,7 @@ def settle_times(times, labels) -> np.ndarray:
     return out
 
 
-def coupled_settling_result(rollout) -> CoupledSettling:
+def coupled_settling_result(rollout, command: float = COMMAND) -> CoupledSettling:
     contact = gait.rpd_timeseries(rollout.data["grf"], dt=rollout.dt, interval=SETTLE_INTERVAL_S)
     labels = contact.labels
     at_10 = np.flatnonzero(np.isclose(contact.times, 10.0))
@@ -154,7 +154,7 @@ def coupled_settling_result(rollout) -> CoupledSettling:
         mix=[{g: float(np.mean(labels[:, c] == g)) for g in gait.GAIT_LABELS} for c in range(labels.shape[1])],
         regular_at_10s=float(regular[:, at_10[0]].mean()) if at_10.size else float("nan"),
         median_settle_s=float(np.median(settle_times(contact.times, labels))),
-        velocity_error=float(np.mean(np.abs(_forward_velocity(rollout) - COMMAND))),
+        velocity_error=float(np.mean(np.abs(_forward_velocity(rollout) - command))),
         leg_shares=[float(x) for x in np.mean(per_leg / per_leg.sum(axis=1, keepdims=True), axis=0)],
         falls=int(rollout.fell().sum()),
         identical=rollout.robots_alike(),
@@ -164,26 +164,27 @@ def coupled_settling_result(rollout) -> CoupledSettling:
 def measure(policies: list[PolicyRun], robots: int = QUICK["robots"], duration_s: float = QUICK["duration_s"],
             settle_robots: int = QUICK["settle_robots"], settle_duration_s: float = QUICK["settle_duration_s"],
             settings: EvalSettings = EvalSettings(), seed: int = 0, num_threads: int = 0,
-            progress: bool = True) -> list[Obedience]:
-    """Obedience (and, when settle_robots > 0, coupled settling) of each policy; all policies share batches."""
+            progress: bool = True, command: float = COMMAND) -> list[Obedience]:
+    """Obedience (and, when settle_robots > 0, coupled settling) of each policy; all policies share batches.
+    `command` [m/s] replaces the protocol's 1 m/s forward command (to ask at which speeds a gait is held)."""
     dt = 1.0 / policies[0].env_cfg.control.frequency_hz
     record = ("grf", "phase", "base_lin_vel", "terminated")
     jobs = [Job(p, robots) for p in policies]
     started: list[dict[str, StartedGait]] = [{} for _ in policies]
     for g in STARTED_GAITS:
         gait_settings = dataclasses.replace(settings, phase_init=g, coupling=0.0)
-        rollouts = run_jobs(jobs, int(round(duration_s / dt)), gait_settings, command=(COMMAND, 0.0, 0.0),
+        rollouts = run_jobs(jobs, int(round(duration_s / dt)), gait_settings, command=(command, 0.0, 0.0),
                             record=record, seed=seed, num_threads=num_threads, progress=progress,
                             label=f"obedience, {g}")
         for i, r in enumerate(rollouts):
-            started[i][g] = started_gait_result(r, g)
+            started[i][g] = started_gait_result(r, g, command)
     settling: list[CoupledSettling | None] = [None] * len(policies)
     if settle_robots > 0:
         coupled = dataclasses.replace(settings, phase_init="random", coupling=1.0)
         rollouts = run_jobs([Job(p, settle_robots) for p in policies], int(round(settle_duration_s / dt)), coupled,
-                            command=(COMMAND, 0.0, 0.0), record=record, seed=seed, num_threads=num_threads,
+                            command=(command, 0.0, 0.0), record=record, seed=seed, num_threads=num_threads,
                             progress=progress, label="obedience, sigma = 1")
-        settling = [coupled_settling_result(r) for r in rollouts]
+        settling = [coupled_settling_result(r, command) for r in rollouts]
     return [Obedience(p.name, p.orc, s, c) for p, s, c in zip(policies, started, settling)]
 
 

@@ -52,6 +52,12 @@ def test_stepping_in_place_earns_the_label_but_does_not_walk():
         assert obedience.Obedience("p", "111", started).obeys() == bool(walking)
 
 
+def test_walking_is_judged_against_the_command_asked_for():
+    rollout = synthetic_rollout(IDEAL_GAITS["bound"], speed=0.6)
+    assert obedience.started_gait_result(rollout, "bound", command=1.0).walking == 1.0
+    assert obedience.started_gait_result(rollout, "bound", command=2.0).walking == 0.0  # 0.6 m/s under 2 m/s
+
+
 def test_robots_alike_is_decided_by_their_samples_not_their_records():
     r = synthetic_rollout(IDEAL_GAITS["trot"])
     assert not obedience.started_gait_result(r, "trot").identical

@@ -10,7 +10,8 @@ For each checkpoint (all checkpoints batched together, 16 robots per measurement
     1 m/s, share walking that gait at 10 s; sigma = 1 from random phases, share regular at 10 s;
   - the verdict on both goals: every envelope command met, and Obedience.obeys (each started gait
     walked at half the command's speed or more by 80 % of the robots, 80 % regular at 10 s, no falls).
-One summary line per checkpoint on stdout, then every envelope line.
+One summary line per checkpoint on stdout, then every envelope line. --gait_speeds adds, per checkpoint
+and speed, the started gaits at sigma = 0 under that forward command (walking: at half of it or more).
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--checkpoints", type=int, nargs="*", default=None, help="these iterations instead")
     parser.add_argument("--robots", type=int, default=16)
     parser.add_argument("--num_threads", type=int, default=0)
+    parser.add_argument("--gait_speeds", type=float, nargs="*", default=(), metavar="V",
+                        help="also the started gaits at sigma = 0 under these forward commands [m/s]")
     args = parser.parse_args(argv)
 
     available = runs.list_checkpoints(args.run_dir)
@@ -51,6 +54,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{policy.name} | goals: {verdict} | envelope met {len(rows) - len(missed)}/{len(rows)}"
               f"{' | missed: ' + '; '.join(missed) if missed else ''} | {ob.summary()}", flush=True)
     print("\n".join(envelope.summary_lines(env_results)))
+    for speed in args.gait_speeds:
+        at_speed = obedience.measure(policies, robots=args.robots, settle_robots=0, num_threads=args.num_threads,
+                                     command=speed, progress=False)
+        for policy, ob in zip(policies, at_speed):
+            print(f"{policy.name} | command {speed:g} m/s | {ob.summary()}")
     return 0
 
 
