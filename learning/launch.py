@@ -85,6 +85,8 @@ class Plan:
     defaults: Any  # learning.machine.RunDefaults
     resume_from: str | None = None
     trained_env_cfg: Any = None  # env config of the run resumed from
+    # A resumed run takes its checkpoint's (possibly adapted) learning rate unless this command sets one.
+    learning_rate_given: bool = False
     video: tuple[int, float] | None = None  # a clip of robot 0 every N iterations, this many simulated seconds
 
 
@@ -177,8 +179,9 @@ def resolve(args: RunRequest) -> Plan:
     runs.check_folder_names(train_cfg.experiment_name, train_cfg.run_name)
     check_logger_ready(train_cfg)
     video = None if args.video is None else (args.video, args.video_length)
+    learning_rate_given = args.resume and any(item.partition("=")[0].strip() == "train.algorithm.learning_rate" for item in args.overrides)
     return Plan(task, env_cfg, train_cfg, log_root, ranks.rank, ranks.world_size, device, defaults, resume_from,
-                trained_env_cfg, video)
+                trained_env_cfg, learning_rate_given, video)
 
 
 def start_run(plan: Plan, run_dir: str | None = None, lock_fix: str = NEW_FOLDER_FIX, progress_prefix: str | None = None):
@@ -205,6 +208,8 @@ def start_run(plan: Plan, run_dir: str | None = None, lock_fix: str = NEW_FOLDER
                 f"train.max_iterations {train_cfg.max_iterations}; pass --max_iterations N to train N more"
             )
         env.task.continue_from_step(runner.current_learning_iteration * train_cfg.num_steps_per_env)
+        if plan.learning_rate_given:  # rsl-rl's load takes the optimizer's rate; the command's wins
+            runner.set_learning_rate(train_cfg.algorithm.learning_rate)
     if plan.video is not None and plan.rank == 0:
         from learning.video import TrainingVideo
 

@@ -301,3 +301,9 @@ class TaskRunner(OnPolicyRunner):
         if self.alg.load(data, load_cfg, strict):
             self.current_learning_iteration = int(data.get("iter", 0))
         return data.get("infos")
+
+    def set_learning_rate(self, rate: float) -> None:
+        """The PPO learning rate from now on (the adaptive schedule, if on, starts from it)."""
+        self.alg.learning_rate = rate
+        for group in self.alg.optimizer.param_groups:
+            group["lr"] = rate

@@ -102,6 +102,23 @@ def test_a_resumed_run_continues_its_reward_schedule_where_the_checkpoint_left_i
     assert "rewards: second stage from iteration 3 (no change)" in capsys.readouterr().out
 
 
+def test_a_resume_that_sets_the_learning_rate_trains_at_it(trained, tmp_path):
+    from learning import launch
+
+    _, run = trained
+    saved = torch.load(os.path.join(run, "model_2.pt"), weights_only=True)["optimizer_state_dict"]
+    adapted = saved["param_groups"][0]["lr"]  # the adaptive schedule moved it off 1e-3 in two iterations
+    for overrides, rate in (([], adapted), (["train.algorithm.learning_rate=3e-5"], 3e-5)):
+        plan = launch.resolve(launch.RunRequest(resume=True, load_run=run, log_root=str(tmp_path / str(rate)),
+                                                max_iterations=1, num_threads=1,
+                                                overrides=["train.algorithm.schedule=fixed", *overrides]))
+        runner, _, lock = launch.start_run(plan)
+        runner.learn(1, False)
+        lock.release()
+        assert [g["lr"] for g in runner.alg.optimizer.param_groups] == [rate] and runner.alg.learning_rate == rate
+    assert adapted != 1e-3
+
+
 def test_same_seed_same_weights_other_seed_other_weights(trained, tmp_path):
     _, run = trained
     assert run_train(tmp_path, "--max_iterations", "2", "--seed", "1") == 0
