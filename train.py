@@ -148,12 +148,8 @@ def _main(args: argparse.Namespace) -> int:
                                     train_cfg.max_iterations - runner.current_learning_iteration, plan.world,
                                     mirrored=train_cfg.algorithm.symmetry_cfg.use_data_augmentation))
             print(f"task {plan.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
-            stage = env_cfg.rewards.second_stage
-            if stage.start_step:
-                changes = [f"{name} {weight:g}" for name, weight in stage.weights.items()]
-                changes += [f"{stage.tracking_error} tracking errors"] if stage.tracking_error else []
-                print(f"rewards: second stage from iteration {-(-stage.start_step // train_cfg.num_steps_per_env)} "
-                      f"({', '.join(changes) or 'no change'})")
+            for start_step, changes in env_cfg.second_stages():
+                print(f"second stage from iteration {-(-start_step // train_cfg.num_steps_per_env)}: {changes}")
             print(f"run folder {run_dir}{resuming}", flush=True)
 
         with StopRequest(announce=plan.rank == 0) as stop:

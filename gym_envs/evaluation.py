@@ -46,5 +46,6 @@ def evaluation_overrides(
             "init_state.mode=default",
         ]
         if hasattr(cfg, "osc"):
-            items.append("osc.coupling_off_prob=0.0")  # episodes drawn with sigma = 0 are a training randomisation
+            # Episodes drawn with sigma = 0 are a training randomisation, in either stage.
+            items += ["osc.coupling_off_prob=0.0", "osc.second_stage.start_step=0"]
     return items

@@ -156,9 +156,10 @@ class LeggedRobot:
         """Continue a run whose policy has trained `step` control steps per env: the step counter (push
         timing, reward stage) resumes there instead of at 0."""
         self.common_step_counter = step
-        self._update_reward_stage()
+        self._update_stages()
 
-    def _update_reward_stage(self) -> None:
+    def _update_stages(self) -> None:
+        """Switch to the second stage of each curriculum whose start step has come (tasks add their own)."""
         stage = self.cfg.rewards.second_stage
         if self.reward_stage == 1 and stage.start_step and self.common_step_counter >= stage.start_step:
             self.reward_weights.update(stage.weights)
@@ -243,7 +244,7 @@ class LeggedRobot:
     def _post_physics_step(self, state: SimState, diverged: torch.Tensor) -> None:
         self.episode_length_buf += 1
         self.common_step_counter += 1
-        self._update_reward_stage()
+        self._update_stages()
         self._update_state(state)
         self._after_physics()
         # Index lists (a host sync each on CUDA) only where they size random draws: a draw per chosen

@@ -212,6 +212,15 @@ class LeggedRobotCfg:
     push: PushCfg = field(default_factory=PushCfg)
     domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)
 
+    def second_stages(self) -> list[tuple[int, str]]:
+        """(start step, what changes) for each curriculum stage that is set; tasks add their own."""
+        stage = self.rewards.second_stage
+        if not stage.start_step:
+            return []
+        changes = [f"{name} {weight:g}" for name, weight in stage.weights.items()]
+        changes += [f"{stage.tracking_error} tracking errors"] if stage.tracking_error else []
+        return [(stage.start_step, f"rewards: {', '.join(changes) or 'no change'}")]
+
     def validate(self) -> None:
         """Raise a one-line ConfigError for the first value outside its RULES (or not finite)."""
         check_values(self, self.RULES)

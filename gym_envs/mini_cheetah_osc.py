@@ -13,7 +13,7 @@ from typing import ClassVar
 import torch
 
 from gym_envs import oscillators
-from gym_envs.config import Check, OneOf
+from gym_envs.config import Check, OneOf, Range
 from gym_envs.legged_robot_config import (
     NON_NEGATIVE,
     SHARE,
@@ -31,6 +31,23 @@ from gym_envs.orc import ORC_FORMAT, is_orc_string, parse_orc
 
 OSCILLATOR_OBSERVATIONS = ("oscillator_obs", "oscillators_vel")
 PHASE_REWARDS = ("swing_grf", "stance_grf")
+GAIT_WEIGHTS = (
+    NON_NEGATIVE,
+    Check(lambda w: not w or (len(w) == len(oscillators.GAIT_NAMES) and sum(w) > 0),
+          f"empty (uniform) or {len(oscillators.GAIT_NAMES)} weights for "
+          f"{', '.join(oscillators.GAIT_NAMES)} with a positive sum"),
+)
+
+
+@dataclass
+class OscillatorStageCfg:
+    """The uncoupled episodes' settings from `start_step` control steps on (counted like
+    rewards.second_stage.start_step): e.g. more sigma = 0 episodes, weighted to the rarely held gaits,
+    only once the robots walk (docs/recipe-study.md, E36-E39). Both values replace the first stage's."""
+
+    start_step: int = 0  # 0: no second stage
+    coupling_off_prob: float = 0.0
+    uncoupled_gait_weights: tuple[float, ...] = ()
 
 
 @dataclass
@@ -55,6 +72,7 @@ class OscillatorCfg:
     # Quirk switches of the released code, off by default:
     hold_grf: bool = False  # integrate all substeps with the previous control step's last force
     grf_normaliser_mass: float = 0.0  # [kg]; 0 uses the model's mass (8.952), the release used 8.292
+    second_stage: OscillatorStageCfg = field(default_factory=OscillatorStageCfg)
 
 
 @dataclass
@@ -69,12 +87,10 @@ class MiniCheetahOscCfg(MiniCheetahCfg):
         "osc.coupling_max": NON_NEGATIVE,
         "osc.coupling_off_prob": SHARE,
         "osc.uncoupled_init": OneOf(oscillators.PHASE_INIT_MODES),
-        "osc.uncoupled_gait_weights": (
-            NON_NEGATIVE,
-            Check(lambda w: not w or (len(w) == len(oscillators.GAIT_NAMES) and sum(w) > 0),
-                  f"empty (uniform) or {len(oscillators.GAIT_NAMES)} weights for "
-                  f"{', '.join(oscillators.GAIT_NAMES)} with a positive sum"),
-        ),
+        "osc.uncoupled_gait_weights": GAIT_WEIGHTS,
+        "osc.second_stage.start_step": Range(0),
+        "osc.second_stage.coupling_off_prob": SHARE,
+        "osc.second_stage.uncoupled_gait_weights": GAIT_WEIGHTS,
         "osc.stand_threshold": NON_NEGATIVE,
         "osc.standing_rule": OneOf(oscillators.STANDING_RULES),
         "osc.grf_normaliser_mass": NON_NEGATIVE,
@@ -146,6 +162,14 @@ class MiniCheetahOscCfg(MiniCheetahCfg):
     )
     osc: OscillatorCfg = field(default_factory=OscillatorCfg)
 
+    def second_stages(self) -> list[tuple[int, str]]:
+        stage = self.osc.second_stage
+        if not stage.start_step:
+            return super().second_stages()
+        weights = f", gait weights {list(stage.uncoupled_gait_weights)}" if stage.uncoupled_gait_weights else ""
+        return super().second_stages() + [
+            (stage.start_step, f"oscillators: {stage.coupling_off_prob:g} of the episodes uncoupled{weights}")]
+
 
 def apply_orc(cfg: MiniCheetahOscCfg) -> MiniCheetahOscCfg:
     """Make the observation groups and reward weights say what cfg.osc.orc says (in place)."""
@@ -188,6 +212,17 @@ class MiniCheetahOsc(MiniCheetah):
         self.coupling = torch.zeros(n, 1, device=dev)
         self.offset = torch.zeros(n, 1, device=dev)
         self.coupling_on = torch.ones(n, 1, device=dev)  # 0 for episodes drawn with sigma = 0
+        # The uncoupled episodes' share and gait weights of the current stage (osc.second_stage).
+        self.coupling_off_prob = self.cfg.osc.coupling_off_prob
+        self.uncoupled_gait_weights = self.cfg.osc.uncoupled_gait_weights
+        self.osc_stage = 1
+
+    def _update_stages(self) -> None:
+        super()._update_stages()
+        stage = self.cfg.osc.second_stage
+        if self.osc_stage == 1 and stage.start_step and self.common_step_counter >= stage.start_step:
+            self.coupling_off_prob, self.uncoupled_gait_weights = stage.coupling_off_prob, stage.uncoupled_gait_weights
+            self.osc_stage = 2
 
     def _pre_physics_step(self) -> None:
         osc = self.cfg.osc
@@ -201,8 +236,7 @@ class MiniCheetahOsc(MiniCheetah):
             coupling_enabled=self.orc.coupling,
             stand_speed=oscillators.standing_speed(self.commands, osc.standing_rule),
         )
-        if osc.coupling_off_prob > 0.0:
-            self.coupling = self.coupling * self.coupling_on
+        self.coupling = self.coupling * self.coupling_on
 
     def _after_physics(self) -> None:
         grf = torch.clamp(self.foot_forces / self.grf_normaliser, 0.0, 1.0)  # (N, substeps, legs)
@@ -219,14 +253,16 @@ class MiniCheetahOsc(MiniCheetah):
         )
         self.phase_vel[env_ids] = 0.0
         self.grf[env_ids] = 0.0
-        if self.cfg.osc.coupling_off_prob > 0.0:
+        if self.coupling_off_prob == 0.0:
+            self.coupling_on[env_ids] = 1.0
+        else:
             draw = torch.rand(len(env_ids), 1, generator=self.generator, device=self.device)
-            self.coupling_on[env_ids] = (draw >= self.cfg.osc.coupling_off_prob).float()
+            self.coupling_on[env_ids] = (draw >= self.coupling_off_prob).float()
             if self.cfg.osc.uncoupled_init != self.cfg.osc.init:
                 uncoupled = env_ids[self.coupling_on[env_ids, 0] == 0.0]
                 self.phase[uncoupled] = oscillators.initial_phases(
                     len(uncoupled), self.cfg.osc.uncoupled_init, generator=self.generator, device=self.device,
-                    gait_weights=self.cfg.osc.uncoupled_gait_weights or None,
+                    gait_weights=self.uncoupled_gait_weights or None,
                 )
 
     def _log_episodes(self, env_ids: torch.Tensor) -> None:

@@ -88,15 +88,14 @@ PROFILES["cpu_oscillators"] = Profile(
 # with the paper's kinds of command (backwards, sideways, turning, on the spot) and the squared-exponential
 # yaw term, trained in two stages: tracking errors relative to the command for 600 iterations, so that the
 # robots learn speed, then absolute errors and doubled phase rewards, so that they reach the envelope's
-# edges and keep to their oscillators. Three-eighths of the episodes run uncoupled, bound drawn three times
-# as often as each other gait among their starts: at 1 m/s the slow gaits are only walked when they get
-# enough of that data (E30, E31, E36). E36-E38 changed those two settings from iteration 600 on; the
-# profile has them from the start, which obeys at 1200 but steps sideways too little and settles worse
-# (E39): a candidate, not yet the default.
+# edges and keep to their oscillators. In the second stage three-eighths of the episodes run uncoupled,
+# bound drawn three times as often as each other gait among their starts: at 1 m/s the slow gaits are only
+# walked when they get enough of that data (E30, E31, E36); from the start, that share slows the first
+# stage and leaves coupled robots settling worse (E39).
 PROFILES["cpu_envelope"] = Profile(
     "cpu_oscillators with the paper's kinds of command (v_x from {-1, 0, 1, 2, 3} m/s, v_y +-0.75, yaw +-2, "
     "20 % turns on the spot), 1200 iterations: relative tracking errors, then from iteration 600 absolute ones "
-    "and phase rewards of 10; 3/8 of the episodes uncoupled, bound drawn 3x (docs/recipe-study.md)",
+    "and phase rewards of 10, 3/8 of the episodes uncoupled with bound drawn 3x (docs/recipe-study.md)",
     PROFILES["cpu_oscillators"].overrides + (
         "train.max_iterations=1200",
         "train.save_interval=100",
@@ -109,8 +108,9 @@ PROFILES["cpu_envelope"] = Profile(
         "rewards.second_stage.start_step=14400",  # iteration 600 at 24 steps per iteration
         "rewards.second_stage.tracking_error=absolute",
         "rewards.second_stage.weights={swing_grf: 10.0, stance_grf: 10.0}",
-        "osc.coupling_off_prob=0.375",
-        "osc.uncoupled_gait_weights=[1.0, 1.0, 3.0, 1.0]",
+        "osc.second_stage.start_step=14400",
+        "osc.second_stage.coupling_off_prob=0.375",
+        "osc.second_stage.uncoupled_gait_weights=[1.0, 1.0, 3.0, 1.0]",
     ),
     tasks=("mini_cheetah_osc",),
 )

@@ -99,7 +99,7 @@ def test_a_resumed_run_continues_its_reward_schedule_where_the_checkpoint_left_i
         assert (task.common_step_counter, task.reward_stage) == (16, stage)
         assert task.reward_weights["swing_grf"] == (9.0 if stage == 2 else 5.0)
     assert run_train(tmp_path / "new", "--max_iterations", "1", "--set", "rewards.second_stage.start_step=20") == 0
-    assert "rewards: second stage from iteration 3 (no change)" in capsys.readouterr().out
+    assert "second stage from iteration 3: rewards: no change" in capsys.readouterr().out
 
 
 def test_a_resume_that_sets_the_learning_rate_trains_at_it(trained, tmp_path):

@@ -214,6 +214,25 @@ def test_absolute_tracking_errors_hold_a_fast_command_to_the_width_of_a_slow_one
     assert lin == pytest.approx([math.exp(-(0.3**2) / 0.25)] * 2) and yaw == pytest.approx(lin)
 
 
+def test_the_oscillators_second_stage_changes_the_uncoupled_draws_from_its_step_on():
+    stage = ["osc.coupling_off_prob=0.25", "osc.second_stage.start_step=2", "osc.second_stage.coupling_off_prob=1.0",
+             "osc.uncoupled_init=any_gait", "osc.second_stage.uncoupled_gait_weights=[0.0, 0.0, 1.0, 0.0]"]
+    env = quiet_standing(64, overrides_extra=stage)
+    first_draw = env.coupling_on.clone()
+    assert 0 < (first_draw == 0).sum().item() < 64  # a quarter uncoupled, started in any gait
+    env.step(torch.zeros(64, env.num_actions))
+    assert env.osc_stage == 1
+    env.step(torch.zeros(64, env.num_actions))
+    assert env.osc_stage == 2 and torch.equal(env.coupling_on, first_draw)  # draws change at resets only
+    env.reset()
+    labels, _ = oscillators.classify_rpd(oscillators.relative_phases(env.phase))
+    assert (env.coupling_on == 0).all() and (labels == oscillators.GAIT_NAMES.index("bound")).all()
+    assert "oscillators: 1 of the episodes uncoupled, gait weights [0.0, 0.0, 1.0, 0.0]" in [
+        text for _, text in apply_overrides(MiniCheetahOscCfg(), stage).second_stages()]
+    with pytest.raises(ConfigError, match="osc.second_stage.uncoupled_gait_weights"):
+        apply_overrides(MiniCheetahOscCfg(), ["osc.second_stage.uncoupled_gait_weights=[1.0]"]).validate()
+
+
 def test_the_second_reward_stage_takes_over_at_its_step_and_obeys_the_orc():
     stage = ["rewards.second_stage.start_step=3", "rewards.second_stage.tracking_error=absolute",
              "rewards.second_stage.weights={swing_grf: 10.0, cursorial: 0.5}", "rewards.weights.cursorial=0.0"]
