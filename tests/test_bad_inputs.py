@@ -27,7 +27,8 @@ ANALYSIS = {"analysis.report": report, "analysis.balanced_legs": balanced_legs,
 # Provenance keys: any string is a valid value, and setting them changes nothing.
 NO_BAD_VALUE = {"train.profile", "train.resumed_from"}
 # Keys whose default (empty) gives the generic cases nothing to shape a bad value from.
-BAD_VALUES_OF = {"osc.uncoupled_gait_weights": ["3", "[1.0, 2.0]", "[-1.0, 1.0, 1.0, 1.0]", "[0.0, 0.0, 0.0, 0.0]"]}
+BAD_GAIT_WEIGHTS = ["3", "[1.0, 2.0]", "[-1.0, 1.0, 1.0, 1.0]", "[0.0, 0.0, 0.0, 0.0]"]
+BAD_VALUES_OF = {"osc.uncoupled_gait_weights": BAD_GAIT_WEIGHTS, "osc.second_stage.uncoupled_gait_weights": BAD_GAIT_WEIGHTS}
 
 
 @pytest.fixture
