@@ -31,6 +31,7 @@ from gym_envs.orc import ORC_FORMAT, is_orc_string, parse_orc
 
 OSCILLATOR_OBSERVATIONS = ("oscillator_obs", "oscillators_vel")
 PHASE_REWARDS = ("swing_grf", "stance_grf")
+UNCOUPLED_COMMANDS = ("any", "straight")
 GAIT_WEIGHTS = (
     NON_NEGATIVE,
     Check(lambda w: not w or (len(w) == len(oscillators.GAIT_NAMES) and sum(w) > 0),
@@ -67,6 +68,10 @@ class OscillatorCfg:
     # With 'any_gait': relative weights of trot, pace, bound, pronk (oscillators.GAIT_NAMES); empty draws
     # them uniformly. Coupled episodes mostly trot already, so a weight moves data to the gaits seldom held.
     uncoupled_gait_weights: tuple[float, ...] = ()
+    # The commands of those episodes: 'any' as drawn for every episode; 'straight' without the lateral
+    # and yaw components, so that the started gaits are walked where obedience is asked of them
+    # (straight ahead) instead of mostly while turning or side-stepping (docs/recipe-study.md, E46).
+    uncoupled_commands: str = "any"
     stand_threshold: float = 0.5  # a standing speed (standing_rule) below this uses the standing parameters
     standing_rule: str = "lin_vel_x"  # one of gym_envs.oscillators.STANDING_RULES
     # Quirk switches of the released code, off by default:
@@ -88,6 +93,7 @@ class MiniCheetahOscCfg(MiniCheetahCfg):
         "osc.coupling_off_prob": SHARE,
         "osc.uncoupled_init": OneOf(oscillators.PHASE_INIT_MODES),
         "osc.uncoupled_gait_weights": GAIT_WEIGHTS,
+        "osc.uncoupled_commands": OneOf(UNCOUPLED_COMMANDS),
         "osc.second_stage.start_step": Range(0),
         "osc.second_stage.coupling_off_prob": SHARE,
         "osc.second_stage.uncoupled_gait_weights": GAIT_WEIGHTS,
@@ -264,6 +270,15 @@ class MiniCheetahOsc(MiniCheetah):
                     len(uncoupled), self.cfg.osc.uncoupled_init, generator=self.generator, device=self.device,
                     gait_weights=self.uncoupled_gait_weights or None,
                 )
+        if self.cfg.osc.uncoupled_commands == "straight":
+            # The reset's commands were drawn before the coupling draw, under the last episode's coupling.
+            self._resample_commands(env_ids)
+
+    def _resample_commands(self, env_ids: torch.Tensor) -> None:
+        super()._resample_commands(env_ids)
+        if self.cfg.osc.uncoupled_commands == "straight":
+            uncoupled = env_ids[self.coupling_on[env_ids, 0] == 0.0]
+            self.commands[uncoupled, 1:] = 0.0
 
     def _log_episodes(self, env_ids: torch.Tensor) -> None:
         super()._log_episodes(env_ids)

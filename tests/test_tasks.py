@@ -233,6 +233,29 @@ def test_the_oscillators_second_stage_changes_the_uncoupled_draws_from_its_step_
         apply_overrides(MiniCheetahOscCfg(), ["osc.second_stage.uncoupled_gait_weights=[1.0]"]).validate()
 
 
+def test_uncoupled_episodes_walk_straight_when_asked_and_coupled_ones_keep_every_command():
+    overrides = ["osc.coupling_off_prob=0.5", "commands.zero_lateral_and_yaw_prob=0", "commands.zero_planar_prob=0",
+                 "commands.zero_all_prob=0", "commands.lin_vel_y=[0.2, 0.7]", "commands.yaw_rate=[0.5, 1.5]"]
+
+    def lateral_and_yaw_by_coupling(env):
+        on = env.coupling_on[:, 0] == 1.0
+        return env.commands[on, 1:], env.commands[~on, 1:]
+
+    env = osc_env(256, overrides + ["osc.uncoupled_commands=straight"])
+    draws = []
+    for refresh in (lambda: None, lambda: env._resample_commands(torch.arange(256)), env.reset, env.reset):
+        refresh()  # the first reset's draw, a mid-episode resample, two more resets with new coupling draws
+        coupled, uncoupled = lateral_and_yaw_by_coupling(env)
+        assert len(coupled) > 64 and len(uncoupled) > 64
+        assert (uncoupled == 0).all() and (coupled > 0).all()  # ranges exclude zero: nothing coupled was zeroed
+        draws.append(env.coupling_on.clone())
+    assert not torch.equal(draws[-1], draws[-2])  # robots changed coupling between the last two resets
+    _, uncoupled = lateral_and_yaw_by_coupling(osc_env(256, overrides))  # the default: every command as drawn
+    assert (uncoupled > 0).all()
+    with pytest.raises(ConfigError, match="osc.uncoupled_commands"):
+        apply_overrides(MiniCheetahOscCfg(), ["osc.uncoupled_commands=forward"]).validate()
+
+
 def test_the_second_reward_stage_takes_over_at_its_step_and_obeys_the_orc():
     stage = ["rewards.second_stage.start_step=3", "rewards.second_stage.tracking_error=absolute",
              "rewards.second_stage.weights={swing_grf: 10.0, cursorial: 0.5}", "rewards.weights.cursorial=0.0"]
