@@ -30,8 +30,9 @@ from gym_envs.mini_cheetah import PROPRIOCEPTION, MiniCheetah, MiniCheetahCfg
 from gym_envs.orc import ORC_FORMAT, is_orc_string, parse_orc
 
 OSCILLATOR_OBSERVATIONS = ("oscillator_obs", "oscillators_vel")
-PHASE_REWARDS = ("swing_grf", "stance_grf")
+PHASE_REWARDS = ("swing_grf", "stance_grf", "swing_contact")
 UNCOUPLED_COMMANDS = ("any", "straight")
+SWING_CONTACT_FORCE = 0.1  # [body weights] a foot carrying more is in contact (the gait analysis's threshold)
 GAIT_WEIGHTS = (
     NON_NEGATIVE,
     Check(lambda w: not w or (len(w) == len(oscillators.GAIT_NAMES) and sum(w) > 0),
@@ -147,6 +148,7 @@ class MiniCheetahOscCfg(MiniCheetahCfg):
                 "cursorial": 0.25,
                 "swing_grf": 5.0,
                 "stance_grf": 5.0,
+                "swing_contact": 0.0,  # not in the paper; the envelope recipe's second stage (E47)
             },
             termination_penalty=0.15,
             base_height_target=0.36,
@@ -306,3 +308,9 @@ class MiniCheetahOsc(MiniCheetah):
 
     def _reward_stance_grf(self):
         return torch.sum(torch.clamp(-torch.sin(self.phase), min=0.0) * self.grf, dim=1)
+
+    def _reward_swing_contact(self):
+        # Each foot in contact during its swing half, whatever its force: a light extra step costs as
+        # much as a heavy one, where swing_grf charges it by its small force (docs/recipe-study.md, E47).
+        contact = (self.grf > SWING_CONTACT_FORCE).float()
+        return -torch.sum(torch.clamp(torch.sin(self.phase), min=0.0) * contact, dim=1)

@@ -175,6 +175,17 @@ def test_phase_rewards_sign_and_scale():
     assert env._reward_swing_grf().tolist() == pytest.approx([0.0, 0.0])
 
 
+def test_swing_contact_counts_swing_contacts_whatever_their_force():
+    env = quiet_standing(3, overrides_extra=["rewards.weights.swing_contact=1.0"])
+    env.phase[:] = torch.tensor([[0.5 * math.pi] * 4, [0.5 * math.pi] * 4, [1.5 * math.pi] * 4])
+    env.grf[:] = torch.tensor([[0.15] * 4, [0.6] * 4, [0.6] * 4])  # light and heavy swing steps, then stance
+    assert env._reward_swing_contact().tolist() == pytest.approx([-4.0, -4.0, 0.0])
+    assert env._reward_swing_grf()[0] == pytest.approx(0.25 * env._reward_swing_grf()[1])  # the force-weighted term
+    env.grf[:] = 0.05  # below the contact force: in the air
+    assert env._reward_swing_contact().tolist() == pytest.approx([0.0, 0.0, 0.0])
+    assert "swing_contact" not in osc_env(2, orc="101", overrides=["rewards.weights.swing_contact=1.0"]).reward_functions
+
+
 def test_tracking_orientation_and_height_rewards():
     env = quiet_standing(2)
     env.commands[:] = torch.tensor([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
