@@ -195,7 +195,8 @@ def from_dict(cls: type, data: Mapping, path: str = "", complete: bool = False) 
     """Build ``cls`` from a nested dict: strict keys, defaults for missing keys, type-checked values.
 
     A partial nested section is merged onto that field's *default instance*, so a derived task whose
-    ``default_factory`` changes section defaults keeps them for keys the dict does not mention.
+    ``default_factory`` changes section defaults keeps them for keys the dict does not mention; a dict
+    field (reward weights, observation scales) keeps its default entries the same way.
     With ``complete`` (a config the program saved, not one a person writes) a missing key, or a missing
     entry of a dict the defaults fill, is an error naming it: the file was cut short or edited.
     """
@@ -250,10 +251,13 @@ def _build(cls: type, data: Mapping, path: str, base: Any, complete: bool = Fals
         if isinstance(value, Mapping) and is_section:
             kwargs[f.name] = _build(type(default), value, key, base=default, complete=complete)
         else:
-            if complete and isinstance(value, Mapping) and isinstance(default, Mapping):
+            if isinstance(value, Mapping) and isinstance(default, Mapping):
                 for entry in default:
-                    if entry not in value:
+                    if complete and entry not in value:
                         raise _missing_key(_join(key, entry))
+                # Entries the file lacks take the defaults, like missing keys: an older run's reward weights
+                # then hold the terms added since, at their (neutral) defaults, and save complete again.
+                value = {**default, **value}
             kwargs[f.name] = _coerce(hints[f.name], value, key, complete)
     return cls(**kwargs)
 

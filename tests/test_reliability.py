@@ -9,6 +9,7 @@ and the small ones (play's Ctrl-C status, max_iterations: -5, an --out that cann
 from __future__ import annotations
 
 import dataclasses
+import glob
 import os
 import pkgutil
 import re
@@ -216,6 +217,22 @@ def test_a_cut_env_yaml_is_refused_by_play_and_resume_and_older_runs_still_load(
         f.write(f"run_format: {runs.RUN_FORMAT + 1}\n")
     with pytest.raises(runs.RunError, match=r"written by a newer orcgym .*; update orcgym"):
         runs.load_run_configs(run_copy)
+
+
+def test_a_run_from_before_a_reward_term_resumes_into_a_folder_that_loads(run_copy, tmp_path):
+    # Format 6 predates rewards.weights.swing_contact: its weights lack the entry, which then takes the
+    # default (0), and the resumed run saves it, so that the new folder loads as a complete one.
+    path = os.path.join(run_copy, runs.ENV_YAML)
+    text = open(path).read()
+    with open(path, "w") as f:
+        f.write(re.sub(r"^    swing_contact: .*\n", "", text, flags=re.M))
+    with open(os.path.join(run_copy, runs.FORMAT_YAML), "w") as f:
+        f.write("run_format: 6\n")
+    assert runs.load_run_configs(run_copy)[1].rewards.weights["swing_contact"] == 0.0
+    assert resume(run_copy, tmp_path / "resumed") == 0
+    (resumed,) = glob.glob(str(tmp_path / "resumed" / "*" / "*"))
+    assert runs.run_format(resumed) == runs.RUN_FORMAT
+    assert runs.load_run_configs(resumed)[1].rewards.weights["swing_contact"] == 0.0
 
 
 def test_older_runs_keep_the_yaw_term_they_trained_with():
