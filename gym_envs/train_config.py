@@ -116,6 +116,7 @@ class TrainCfg:
         "num_steps_per_env": Range(1),
         "max_iterations": Range(1),
         "save_interval": Range(1),
+        "obs_normalization_frozen_from": Range(0),
         "experiment_name": Check(_folder_name, "a plain folder name (no path separator)"),
         "run_name": Check(_folder_name, "a plain folder name (no path separator)"),
         "logger": OneOf(tuple(LOGGERS)),
@@ -149,6 +150,9 @@ class TrainCfg:
     experiment_name: str = ""  # '' derives it: ORC_<orc> for oscillator tasks, else the task name
     run_name: str = ""  # '' derives it: seed<seed>
     init_at_random_ep_len: bool = True
+    # Completed iteration from which the observation normalisers keep their statistics (0: they learn throughout);
+    # a second stage can start on fixed inputs instead of inputs whose scaling still moves.
+    obs_normalization_frozen_from: int = 0
     logger: str = "tensorboard"  # 'tensorboard', 'wandb' or 'neptune' (rsl-rl's writers; tensorboard events always)
     log_project_name: str = "orcgym"  # W&B / Neptune project
     check_for_nan: bool = True

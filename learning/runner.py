@@ -27,6 +27,7 @@ import signal
 import statistics
 
 import torch
+from rsl_rl.modules import EmpiricalNormalization
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.log_writer import LogWriter
 from rsl_rl.utils.logger import Logger
@@ -246,6 +247,7 @@ class TaskRunner(OnPolicyRunner):
             self.logger.stop_logging_writer()
 
     def _on_start(self) -> None:
+        self._freeze_normalisers_when_due(self._completed)
         distributed.log_sync_digest([self.alg.actor, self.alg.critic], self._completed, self.gpu_global_rank)
 
     def _after_step(self) -> None:
@@ -256,11 +258,20 @@ class TaskRunner(OnPolicyRunner):
 
     def _after_iteration(self, completed: int) -> None:
         self._completed = completed
+        self._freeze_normalisers_when_due(completed)
         distributed.log_sync_digest([self.alg.actor, self.alg.critic], completed, self.gpu_global_rank)
         if self._stop_everywhere():
             raise _Stopped
         if self.video is not None:
             self.video.start_iteration(completed)
+
+    def _freeze_normalisers_when_due(self, completed: int) -> None:
+        frozen_from = self.train_cfg.obs_normalization_frozen_from
+        if not frozen_from or completed < frozen_from:
+            return
+        for model in (self.alg.actor, self.alg.critic):
+            if isinstance(model.obs_normalizer, EmpiricalNormalization):
+                model.obs_normalizer.until = 0  # rsl-rl's normaliser stops learning once its count reaches `until`
 
     def _stop_everywhere(self) -> bool:
         if not self.is_distributed:

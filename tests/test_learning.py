@@ -344,3 +344,22 @@ def test_a_task_is_one_registry_entry(tmp_path, monkeypatch):
     assert runs.list_checkpoints(run) == [0, 1]
     task, _, train_cfg = runs.load_run_configs(run)
     assert (task, train_cfg.profile) == ("toy_cheetah", "cpu_fast")  # the registry entry's CPU recipe
+
+
+def test_frozen_observation_normalisers_keep_their_statistics_from_the_set_iteration():
+    torch.manual_seed(0)
+    env = small_env(8)
+    learning = small_runner(env)
+    frozen = small_runner(env, obs_normalization_frozen_from=1)
+    counts = {}
+    for name, runner in (("learning", learning), ("frozen", frozen)):
+        runner.learn(1)
+        after_one = runner.alg.actor.obs_normalizer.count.item()
+        mean_after_one = runner.alg.critic.obs_normalizer.mean
+        runner.learn(2)
+        counts[name] = (after_one, runner.alg.actor.obs_normalizer.count.item())
+        if name == "frozen":
+            assert torch.equal(runner.alg.critic.obs_normalizer.mean, mean_after_one)
+    steps = 8 * 4  # robots x steps per iteration
+    assert counts["learning"] == (steps, 3 * steps)
+    assert counts["frozen"] == (steps, steps)
