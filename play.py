@@ -146,7 +146,10 @@ def play_overrides(env_cfg, args) -> list[str]:
         raise ConfigError("--osc_init, --coupling and --orc need a task with oscillators")
     if args.coupling == "off":
         items.append("osc.coupling_max=0.0")
-    given = {"osc.init": args.osc_init, "osc.orc": args.orc, "env.seed": args.seed, "sim.backend": args.sim,
+    # On the CPU the threaded mujoco.batch backend, also for a run trained with Warp on a GPU: Warp's CPU device
+    # compiles its kernels first and steps slower, and a laptop may not have the gpu extra at all.
+    sim = args.sim or ("mujoco" if args.device == "cpu" else None)
+    given = {"osc.init": args.osc_init, "osc.orc": args.orc, "env.seed": args.seed, "sim.backend": sim,
              "sim.num_threads": args.num_threads, "env.device": args.device}
     return items + [f"{key}={value}" for key, value in given.items() if value is not None]
 

@@ -9,8 +9,11 @@ Evaluation setting (`EvalSettings`, applied to the run's own env.yaml as `sectio
 overrides, see `eval_overrides`): no random pushes, no command resampling, no time-outs, friction,
 mass and COM randomisation off, reset to the default pose at zero velocity, oscillator ω/σ jitter 0,
 actor observation noise off, deterministic actions (the policy callable is expected to return the
-mean action). Command ranges are all zero, so a robot that falls (its `terminated` flag) is reset
-standing with a zero command, as in the released scripts. Oscillator process noise is a switch
+mean action). Physics runs on the CPU backend (mujoco.batch, task tensors on the CPU) whatever the run
+trained on, so a run trained on a GPU with MuJoCo Warp is analysed on a machine without one; the two
+backends agree to 1e-5 after a control step (tests/test_warp_backend.py, tools/gpu_check.py). Command
+ranges are all zero, so a robot that falls (its `terminated` flag) is reset standing with a zero command,
+as in the released scripts. Oscillator process noise is a switch
 (`EvalSettings.process_noise_std`): 0 by default, the authors' evident intent; the released
 evaluation scripts actually ran with 0.25 because their switch-off wrote to a misnamed field.
 
@@ -185,8 +188,10 @@ def eval_overrides(settings: EvalSettings, cfg) -> list[str]:
 
 
 def eval_env_cfg(run_cfg, settings: EvalSettings, num_envs: int, seed: int = 0, num_threads: int = 0):
-    """A copy of the run's env config in the evaluation setting (the run's config is not modified)."""
-    extra = [f"env.num_envs={int(num_envs)}", f"env.seed={int(seed)}", f"sim.num_threads={int(num_threads)}"]
+    """A copy of the run's env config in the evaluation setting, on the CPU backend (the run's config is not
+    modified)."""
+    extra = [f"env.num_envs={int(num_envs)}", f"env.seed={int(seed)}", f"sim.num_threads={int(num_threads)}",
+             "env.device=cpu", "sim.backend=mujoco"]
     return apply_overrides(run_cfg, eval_overrides(settings, run_cfg) + extra)
 
 

@@ -148,7 +148,8 @@ def add_compute(p: argparse.ArgumentParser, device_default: str | None = None) -
                         + ("cuda when torch sees a CUDA device, else cpu)" if machine else f"{device_default})"))
     p.add_argument("--sim", choices=("mujoco", "warp"),
                    help="physics backend, sets sim.backend (default: "
-                        + ("warp on cuda when the gpu extra is installed, else mujoco)" if machine else "the run's)"))
+                        + ("warp on cuda when the gpu extra is installed, else mujoco)" if machine
+                           else "mujoco on cpu, the run's on cuda)"))
     p.add_argument("--num_threads", type=integer(0), help="CPU threads of the physics and of torch (0: all cores)")
 
 

@@ -175,6 +175,35 @@ def test_play_evaluation_settings(trained):
     assert torch.equal(session.task.commands, torch.tensor([[2.0, 0.5, -1.0]] * 3))
 
 
+def test_a_run_trained_with_warp_on_a_gpu_plays_and_is_analysed_on_the_cpu_backend(trained, tmp_path):
+    """A GPU run records env.device cuda:0 and sim.backend warp; a laptop without CUDA (or the gpu extra) still
+    plays and analyses it, on mujoco.batch. Before, analysis asked torch for a CUDA generator and failed."""
+    import shutil
+
+    import yaml
+
+    from analysis.locomotion import check_locomotion
+    from analysis.rollout import load_policy_run
+    from gym_envs.sim.mujoco_batch import MujocoBatchBackend
+
+    root, run = trained
+    gpu_run = str(tmp_path / "gpu_run")
+    shutil.copytree(run, gpu_run, ignore=shutil.ignore_patterns(".lock"))
+    env_yaml = os.path.join(gpu_run, "env.yaml")
+    data = yaml.safe_load(open(env_yaml))
+    data["env"]["device"], data["sim"]["backend"] = "cuda:0", "warp"
+    yaml.safe_dump(data, open(env_yaml, "w"), sort_keys=False)
+
+    args = play.build_parser().parse_args(["--load_run", gpu_run, "--num_envs", "2", "--num_threads", "1"])
+    session = play.Session(args)
+    assert isinstance(session.task.sim, MujocoBatchBackend) and session.task.device == torch.device("cpu")
+
+    policy = load_policy_run(gpu_run)
+    assert (policy.env_cfg.env.device, policy.env_cfg.sim.backend) == ("cuda:0", "warp")  # as trained
+    check = check_locomotion(policy.policy, policy.env_cfg, warmup_s=0.1, measure_s=5.0, num_envs=2, num_threads=1)
+    assert check.num_envs == 2 and np.isfinite(check.mean_velocity)
+
+
 def _assert_one_line_error(capsys, code, pattern):
     err = capsys.readouterr().err.strip()
     assert code in (1, 2)  # 2: a malformed flag, caught by the parser
