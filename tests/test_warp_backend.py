@@ -126,6 +126,14 @@ def test_divergence_is_reported_not_raised(warp3):
     assert not hold_default(sim, 0.1)[-1].diverged.any()  # the batch goes on
 
 
+def test_only_the_deliberate_line_search_cap_is_kept_quiet(warp3):
+    import mujoco_warp as mjw
+
+    flags = warp3.warp_model.opt.warn_overflow
+    assert not flags & mjw.OverflowType.LS_ITERATIONS
+    assert flags & mjw.OverflowType.NEFC and flags & mjw.OverflowType.NARROWPHASE and flags & mjw.OverflowType.ITERATIONS
+
+
 def test_reset_writes_the_given_state(warp3):
     sim = warp3
     hold_default(sim, 0.1)

@@ -262,6 +262,10 @@ class MujocoWarpBackend(MujocoModelBackend):
                 self.warp_model = mjw.put_model(m, batch_sizes=_batch_sizes(m, num_envs))
             except NotImplementedError as err:
                 raise SimSetupError(f"MuJoCo Warp cannot simulate {model_path!r}: {err}") from None
+            # The scene caps the line search on purpose (ls_iterations, as the CPU backend runs it, which does not
+            # warn); Warp would print two lines each time a world reaches it, hundreds per training iteration on
+            # a GPU. Every other overflow (contacts, constraints) still warns.
+            self.warp_model.opt.warn_overflow &= ~int(mjw.OverflowType.LS_ITERATIONS)
             nconmax, njmax = _constraint_capacity(m)
             self.warp_data = mjw.make_data(m, nworld=num_envs, nconmax=nconmax, njmax=njmax)
             home = self._home_key
