@@ -20,6 +20,9 @@ from dataclasses import dataclass
 # (E14 seeds 0 and 1, 1000 and 600 iterations).
 CPU_STEPS_PER_S = 22_000
 CPU_MIRRORED_STEPS_PER_S = 14_500
+# The paper's settings (4096 robots x 32 steps, [256, 256, 128]) with MuJoCo Warp on one NVIDIA H200, learning and
+# checkpoints included: 0.70 s per iteration over 817 iterations of two runs (docs/gpu.md). The only GPU measured.
+H200_WARP_STEPS_PER_S = 186_000
 CPU_PROFILE, GPU_PROFILE = "cpu_fast", "paper"
 
 
@@ -107,6 +110,11 @@ def expected_duration(device: str, sim: str, num_envs: int, steps_per_env: int, 
                      f"{' and mirror augmentation' if mirrored else ''}, {rate / 1000:g}k env steps/s")
         return (f"expected duration: about {_human(seconds)} for {iterations} iterations x {per_iteration:,} "
                 f"env steps, at {reference} (more cores are faster); the progress lines give this machine's ETA")
+    if device == "cuda" and sim == "warp" and world_size == 1:
+        seconds = iterations * per_iteration / H200_WARP_STEPS_PER_S
+        return (f"expected duration: about {_human(seconds)} for {iterations} iterations x {per_iteration:,} env steps "
+                f"at the rate measured on one NVIDIA H200 with the paper's settings, {H200_WARP_STEPS_PER_S / 1000:g}k "
+                f"env steps/s (other GPUs differ); the progress lines give this machine's ETA")
     return (f"expected duration: no measured rate for {device} with {sim} physics ({iterations} iterations x "
             f"{per_iteration:,} env steps); the progress lines give the ETA from the first iteration")
 
