@@ -11,8 +11,15 @@ phases". Made measurable here, per policy:
      label, not this), and the share of each foot's GRF impulse that falls in its own stance half
      [pi, 2pi).
   b) coupled settling: sigma = 1 (also for policies trained without coupling), random phases, 1 m/s;
-     the gait mix every second, the share in a regular gait at 10 s, and per robot the time
-     from which it stays in one regular gait to the end (median over robots).
+     the gait mix every second, the share in a regular gait at 10 s, per robot the time from which
+     it stays in one regular gait to the end (median over robots), and the share of robots on which
+     one leg carries under LIGHT_LEG_SHARE of the load (a three-legged gait).
+  c) free phases: sigma = 0 from random phases, 1 m/s. The oscillators keep whatever pattern they
+     were started in, mostly none of the four gaits, so this asks whether a policy follows its
+     oscillators outside the ideal-gait starts some recipes train from: per robot at 10 s, the
+     distance between the feet's RPD and the oscillators' RPD (median over robots; a leg that never
+     touches down makes the robot count as not following) and whether the contact and oscillator
+     gait labels agree.
 Policies without phase observations cannot see their oscillators: under the deterministic
 evaluation their robots are one sample repeated (analysis.rollout), which is reported as such
 ("identical robots") rather than as a distribution.
@@ -36,12 +43,13 @@ from analysis.rollout import EvalSettings, Job, PolicyRun, cli_main, run_jobs
 import matplotlib.pyplot as plt  # noqa: E402  (after analysis.plotting selected the Agg backend)
 
 STARTED_GAITS = ("trot", "pace", "bound", "pronk")
-PROTOCOL = {"robots": 64, "duration_s": 10.0, "settle_robots": 64, "settle_duration_s": 40.0}
-QUICK = {"robots": 16, "duration_s": 10.0, "settle_robots": 16, "settle_duration_s": 20.0}
+PROTOCOL = {"robots": 64, "duration_s": 10.0, "settle_robots": 64, "settle_duration_s": 40.0, "free_robots": 64}
+QUICK = {"robots": 16, "duration_s": 10.0, "settle_robots": 16, "settle_duration_s": 20.0, "free_robots": 16}
 COMMAND = 1.0  # [m/s]
 VELOCITY_WINDOW_S = 5.0  # the forward velocity is averaged over the last this many seconds
 GOAL_SHARE = 0.8  # obedience goal: this share of robots walks each started gait, and settles by 10 s
 WALKING_FRACTION = 0.5  # a robot walks when its forward velocity is at least this share of the command
+LIGHT_LEG_SHARE = 0.05  # a leg carrying less than this share of a robot's total GRF is (nearly) unused
 SETTLE_INTERVAL_S = 1.0  # checkpoints of the coupled-settling gait mix (windows of two cycles each)
 FILE_STEM = "obedience"
 
@@ -73,6 +81,20 @@ class CoupledSettling:
     median_settle_s: float  # median over robots of the settling time (inf: more than half never settle)
     velocity_error: float  # mean |v_x - command| over the last VELOCITY_WINDOW_S [m/s]
     leg_shares: list[float]  # each leg's share of the total GRF (RF, LF, RH, LH), mean over robots
+    light_leg: float  # share of robots with a leg under LIGHT_LEG_SHARE of their total GRF
+    falls: int
+    identical: bool
+
+
+@dataclass
+class FreePhases:
+    """One policy at sigma = 0 from random phases: do the feet follow phases that are no ideal gait?"""
+
+    robots: int
+    rpd_distance: float  # median over robots of |contact RPD - oscillator RPD| at the end [rad]; inf: most invalid
+    invalid: float  # share of robots whose contact RPD is undefined at the end (a leg without touchdown)
+    label_agreement: float  # share of robots whose contact and oscillator gait labels agree at the end
+    velocity: float  # mean forward velocity over the last VELOCITY_WINDOW_S [m/s]
     falls: int
     identical: bool
 
@@ -83,6 +105,7 @@ class Obedience:
     orc: str
     started: dict[str, StartedGait]
     settling: CoupledSettling | None = None
+    free: FreePhases | None = None
 
     def obeys(self, share: float = GOAL_SHARE) -> bool:
         """The goal of the recipe study: every started gait walked by `share` of the robots, at least
@@ -99,7 +122,13 @@ class Obedience:
             st = self.settling
             text += (f" | sigma=1: regular at 10 s {100 * st.regular_at_10s:.0f}%, final "
                      f"{gait.mix_text(st.mix[-1], st.identical)}, median settle {st.median_settle_s:g} s, falls {st.falls}, "
-                     f"GRF shares {'/'.join(f'{x:.2f}' for x in st.leg_shares)}")
+                     f"GRF shares {'/'.join(f'{x:.2f}' for x in st.leg_shares)}, "
+                     f"a leg under {LIGHT_LEG_SHARE:g} {100 * st.light_leg:.0f}%")
+        if self.free is not None:
+            fr = self.free
+            text += (f" | sigma=0 random phases: contact-oscillator RPD distance median {fr.rpd_distance:.2f} rad, "
+                     f"labels agree {100 * fr.label_agreement:.0f}%, no RPD {100 * fr.invalid:.0f}%, "
+                     f"{fr.velocity:.2f} m/s, falls {fr.falls}")
         return text
 
 
@@ -148,6 +177,7 @@ def coupled_settling_result(rollout, command: float = COMMAND) -> CoupledSettlin
     at_10 = np.flatnonzero(np.isclose(contact.times, 10.0))
     regular = labels != gait.TRANSITION
     per_leg = rollout.data["grf"].mean(axis=1)  # (N, 4)
+    leg_shares = per_leg / per_leg.sum(axis=1, keepdims=True)
     return CoupledSettling(
         robots=len(labels),
         times=[float(t) for t in contact.times],
@@ -155,7 +185,24 @@ def coupled_settling_result(rollout, command: float = COMMAND) -> CoupledSettlin
         regular_at_10s=float(regular[:, at_10[0]].mean()) if at_10.size else float("nan"),
         median_settle_s=float(np.median(settle_times(contact.times, labels))),
         velocity_error=float(np.mean(np.abs(_forward_velocity(rollout) - command))),
-        leg_shares=[float(x) for x in np.mean(per_leg / per_leg.sum(axis=1, keepdims=True), axis=0)],
+        leg_shares=[float(x) for x in leg_shares.mean(axis=0)],
+        light_leg=float(np.mean((leg_shares < LIGHT_LEG_SHARE).any(axis=1))),
+        falls=int(rollout.fell().sum()),
+        identical=rollout.robots_alike(),
+    )
+
+
+def free_phase_result(rollout) -> FreePhases:
+    contact = gait.rpd_timeseries(rollout.data["grf"], dt=rollout.dt)
+    by_phase = gait.rpd_timeseries(rollout.data["phase"], dt=rollout.dt, method="phase")
+    distance = gait.circular_distance(contact.rpd[:, -1], by_phase.rpd[:, -1])
+    distance[~contact.valid[:, -1]] = np.inf  # feet without an RPD do not follow the oscillators
+    return FreePhases(
+        robots=len(distance),
+        rpd_distance=float(np.median(distance)),
+        invalid=float(np.mean(~contact.valid[:, -1])),
+        label_agreement=float(gait.agreement(contact.labels[:, -1], by_phase.labels[:, -1])),
+        velocity=float(_forward_velocity(rollout).mean()),
         falls=int(rollout.fell().sum()),
         identical=rollout.robots_alike(),
     )
@@ -163,10 +210,11 @@ def coupled_settling_result(rollout, command: float = COMMAND) -> CoupledSettlin
 
 def measure(policies: list[PolicyRun], robots: int = QUICK["robots"], duration_s: float = QUICK["duration_s"],
             settle_robots: int = QUICK["settle_robots"], settle_duration_s: float = QUICK["settle_duration_s"],
-            settings: EvalSettings = EvalSettings(), seed: int = 0, num_threads: int = 0,
+            free_robots: int = 0, settings: EvalSettings = EvalSettings(), seed: int = 0, num_threads: int = 0,
             progress: bool = True, command: float = COMMAND) -> list[Obedience]:
-    """Obedience (and, when settle_robots > 0, coupled settling) of each policy; all policies share batches.
-    `command` [m/s] replaces the protocol's 1 m/s forward command (to ask at which speeds a gait is held)."""
+    """Obedience (and, when settle_robots > 0, coupled settling; when free_robots > 0, free phases) of each
+    policy; all policies share batches. `command` [m/s] replaces the protocol's 1 m/s forward command (to
+    ask at which speeds a gait is held)."""
     dt = 1.0 / policies[0].env_cfg.control.frequency_hz
     record = ("grf", "phase", "base_lin_vel", "terminated")
     jobs = [Job(p, robots) for p in policies]
@@ -185,7 +233,14 @@ def measure(policies: list[PolicyRun], robots: int = QUICK["robots"], duration_s
                             command=(command, 0.0, 0.0), record=record, seed=seed, num_threads=num_threads,
                             progress=progress, label="obedience, sigma = 1")
         settling = [coupled_settling_result(r, command) for r in rollouts]
-    return [Obedience(p.name, p.orc, s, c) for p, s, c in zip(policies, started, settling)]
+    free: list[FreePhases | None] = [None] * len(policies)
+    if free_robots > 0:
+        uncoupled = dataclasses.replace(settings, phase_init="random", coupling=0.0)
+        rollouts = run_jobs([Job(p, free_robots) for p in policies], int(round(duration_s / dt)), uncoupled,
+                            command=(command, 0.0, 0.0), record=record, seed=seed, num_threads=num_threads,
+                            progress=progress, label="obedience, sigma = 0 from random phases")
+        free = [free_phase_result(r) for r in rollouts]
+    return [Obedience(p.name, p.orc, s, c, f) for p, s, c, f in zip(policies, started, settling, free)]
 
 
 def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
@@ -210,6 +265,13 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
                                     *(f"{mix[g]:.4f}" for g in gait.GAIT_LABELS)]
                                    for r in results if r.settling is not None
                                    for t, mix in zip(r.settling.times, r.settling.mix))),
+        "free_csv": write_csv(out / f"{FILE_STEM}_free_phases.csv",
+                              ["policy", "orc", "robots", "rpd_distance_median_rad", "no_rpd", "label_agreement",
+                               "velocity_mps", "falls", "identical_robots", "settling_light_leg"],
+                              ([r.policy, r.orc, r.free.robots, f"{r.free.rpd_distance:.4f}", f"{r.free.invalid:.4f}",
+                                f"{r.free.label_agreement:.4f}", f"{r.free.velocity:.4f}", r.free.falls,
+                                int(r.free.identical), f"{r.settling.light_leg:.4f}" if r.settling else ""]
+                               for r in results if r.free is not None)),
     }
     with paper_style():
         files.update(save_figure(plot(results), out, FILE_STEM))

@@ -286,8 +286,11 @@ def _section_obedience(ob: dict) -> list[str]:
           "is the started one (forward velocity over the last 5 s in brackets), the share of GRF impulse inside each "
           "foot's own stance half [π, 2π) (50 % = ignores its oscillator), and how often the contact and oscillator "
           f"labels agree. σ = 1: random phases, {s['settle_robots']} robots, {s['settle_duration_s']:g} s; share in a "
-          "regular gait at 10 s, final mix, median time from which a robot stays in one regular gait. Figure: "
-          "`obedience.png`.", ""]
+          "regular gait at 10 s, final mix, median time from which a robot stays in one regular gait, share of robots "
+          f"with a leg under {100 * obedience.LIGHT_LEG_SHARE:g} % of the load. σ = 0 from random phases, "
+          f"{s['free_robots']} robots: median distance between the feet's and the oscillators' RPD at "
+          f"{s['duration_s']:g} s (a robot with a leg that never lands counts as not following), contact/oscillator "
+          "label agreement in brackets. Figure: `obedience.png`.", ""]
     rows = []
     for r in ob["results"]:
         started = r.started.values()
@@ -300,11 +303,14 @@ def _section_obedience(ob: dict) -> list[str]:
                      " / ".join(f"{100 * x.stance_share:.0f} %" for x in started),
                      f"{100 * np.mean([x.phase_agreement for x in started]):.0f} %",
                      f"{100 * st.regular_at_10s:.0f} %", gait.mix_text(st.mix[-1], st.identical), _fmt(st.median_settle_s, 0, " s"),
-                     " / ".join(f"{x:.2f}" for x in st.leg_shares), sum(x.falls for x in started) + st.falls])
+                     " / ".join(f"{x:.2f}" for x in st.leg_shares), f"{100 * st.light_leg:.0f} %",
+                     f"{_fmt(r.free.rpd_distance, 2, ' rad')} ({100 * r.free.label_agreement:.0f} %)",
+                     sum(x.falls for x in started) + st.falls + r.free.falls])
     md += [markdown_table(["ORC", "policy", "walks started trot / pace / bound / pronk (v [m/s])",
                            "GRF in stance half", "contact/oscillator agreement", "σ = 1: regular at 10 s",
                            "σ = 1: final gaits", "σ = 1: median settle", "σ = 1: GRF share " + "/".join(LEG_NAMES),
-                           "falls"], rows), ""]
+                           f"σ = 1: a leg under {100 * obedience.LIGHT_LEG_SHARE:g} %", "σ = 0, random phases: RPD distance (labels agree)", "falls"],
+                          rows), ""]
     regular = {}  # per configuration, the per-policy shares of robots in a regular gait at 10 s under σ = 1
     for r in ob["results"]:
         if np.isfinite(r.settling.regular_at_10s):  # NaN: a rollout shorter than 10 s

@@ -14,11 +14,13 @@ DT = 0.01
 
 
 def synthetic_rollout(rpd, robots=3, seconds=10.0, freq=2.5, speed=1.0, follow=True):
-    """Robots whose oscillators run in the gait `rpd`; feet loaded in their stance half when follow=True,
-    else every foot loaded in RF's stance half (a pronk that ignores the other oscillators)."""
+    """Robots whose oscillators run in the gait `rpd` ((3,), or (robots, 3) for one pattern each); feet
+    loaded in their stance half when follow=True, else every foot loaded in RF's stance half (a pronk that
+    ignores the other oscillators)."""
     t = (np.arange(int(seconds / DT)) + 1) * DT
     rf = 2 * PI * freq * t[:, None] + np.linspace(0.3, 2.0, robots)[:, None, None]
-    phase = np.mod(rf - np.concatenate([[0.0], rpd]), 2 * PI)  # (N, T, 4)
+    rpd = np.broadcast_to(rpd, (robots, 3))
+    phase = np.mod(rf - np.concatenate([np.zeros((robots, 1)), rpd], axis=1)[:, None, :], 2 * PI)  # (N, T, 4)
     stance = phase >= PI if follow else np.repeat(phase[..., :1] >= PI, 4, axis=-1)
     grf = 0.5 * stance
     vel = np.zeros(phase.shape[:2] + (3,))
@@ -65,6 +67,32 @@ def test_robots_alike_is_decided_by_their_samples_not_their_records():
     assert not obedience.started_gait_result(r, "trot").identical
     r.sample = np.zeros(r.num_envs, dtype=int)
     assert obedience.started_gait_result(r, "trot").identical
+
+
+def test_free_phases_tell_a_follower_from_a_pronker():
+    """sigma = 0 from random phases: a follower's feet keep each robot's own RPD, a pronker's do not."""
+    patterns = np.random.default_rng(0).uniform(0.0, 2 * PI, size=(6, 3))
+    follower = obedience.free_phase_result(synthetic_rollout(patterns, robots=6))
+    assert follower.rpd_distance < 0.1 and follower.label_agreement == 1.0 and follower.invalid == 0.0
+    pronker = obedience.free_phase_result(synthetic_rollout(patterns, robots=6, follow=False))
+    assert pronker.rpd_distance > 1.0 and pronker.invalid == 0.0
+
+
+def test_free_phases_count_a_leg_that_never_lands_as_not_following():
+    rollout = synthetic_rollout(IDEAL_GAITS["trot"], robots=4)
+    rollout.data["grf"][0, :, 3] = 0.0  # one robot holds LH up
+    res = obedience.free_phase_result(rollout)
+    assert res.invalid == 0.25 and res.rpd_distance < 0.1  # the median of three followers and one inf
+    rollout.data["grf"][1:3, :, 3] = 0.0
+    res = obedience.free_phase_result(rollout)
+    assert res.invalid == 0.75 and np.isinf(res.rpd_distance)
+
+
+def test_a_leg_carrying_almost_nothing_is_counted():
+    rollout = synthetic_rollout(IDEAL_GAITS["trot"], robots=4)
+    assert obedience.coupled_settling_result(rollout).light_leg == 0.0
+    rollout.data["grf"][1, :, 2] *= 0.1  # RH carries 0.1 / 3.1 of robot 1's load
+    assert obedience.coupled_settling_result(rollout).light_leg == 0.25
 
 
 def test_settle_times():
@@ -121,3 +149,19 @@ def test_what_obedience_reports_does_not_depend_on_the_batch_size(shipped_3_and_
         a, b = small["110"].started[g], large["110"].started[g]
         assert not a.identical and not b.identical
         assert a.obeyed == b.obeyed == 1.0
+
+
+def test_the_report_shows_free_phases_and_light_legs():
+    from analysis import report
+
+    started = {g: obedience.started_gait_result(synthetic_rollout(IDEAL_GAITS[g]), g) for g in obedience.STARTED_GAITS}
+    settling = synthetic_rollout(IDEAL_GAITS["trot"], robots=4, seconds=12.0)
+    settling.data["grf"][1, :, 2] *= 0.1
+    patterns = np.random.default_rng(1).uniform(0.0, 2 * PI, size=(4, 3))
+    free = synthetic_rollout(patterns, robots=4, follow=False)
+    result = obedience.Obedience("ORC_111/seed0", "111", started, obedience.coupled_settling_result(settling),
+                                 obedience.free_phase_result(free))
+    section = "\n".join(report._section_obedience({"sizes": obedience.QUICK, "results": [result]}))
+    row = next(line for line in section.splitlines() if line.startswith("| 111 |"))
+    assert "| 25 % |" in row  # robot 1's light leg
+    assert f"| {result.free.rpd_distance:.2f} rad ({100 * result.free.label_agreement:.0f} %) |" in row
