@@ -216,30 +216,25 @@ def measure(policies: list[PolicyRun], robots: int = QUICK["robots"], duration_s
     policy; all policies share batches. `command` [m/s] replaces the protocol's 1 m/s forward command (to
     ask at which speeds a gait is held)."""
     dt = 1.0 / policies[0].env_cfg.control.frequency_hz
-    record = ("grf", "phase", "base_lin_vel", "terminated")
-    jobs = [Job(p, robots) for p in policies]
+
+    def rollouts(n_robots: int, seconds: float, phase_init: str, coupling: float, label: str):
+        return run_jobs([Job(p, n_robots) for p in policies], int(round(seconds / dt)),
+                        dataclasses.replace(settings, phase_init=phase_init, coupling=coupling),
+                        command=(command, 0.0, 0.0), record=("grf", "phase", "base_lin_vel", "terminated"),
+                        seed=seed, num_threads=num_threads, progress=progress, label=label)
+
     started: list[dict[str, StartedGait]] = [{} for _ in policies]
     for g in STARTED_GAITS:
-        gait_settings = dataclasses.replace(settings, phase_init=g, coupling=0.0)
-        rollouts = run_jobs(jobs, int(round(duration_s / dt)), gait_settings, command=(command, 0.0, 0.0),
-                            record=record, seed=seed, num_threads=num_threads, progress=progress,
-                            label=f"obedience, {g}")
-        for i, r in enumerate(rollouts):
+        for i, r in enumerate(rollouts(robots, duration_s, g, 0.0, f"obedience, {g}")):
             started[i][g] = started_gait_result(r, g, command)
     settling: list[CoupledSettling | None] = [None] * len(policies)
     if settle_robots > 0:
-        coupled = dataclasses.replace(settings, phase_init="random", coupling=1.0)
-        rollouts = run_jobs([Job(p, settle_robots) for p in policies], int(round(settle_duration_s / dt)), coupled,
-                            command=(command, 0.0, 0.0), record=record, seed=seed, num_threads=num_threads,
-                            progress=progress, label="obedience, sigma = 1")
-        settling = [coupled_settling_result(r, command) for r in rollouts]
+        settling = [coupled_settling_result(r, command)
+                    for r in rollouts(settle_robots, settle_duration_s, "random", 1.0, "obedience, sigma = 1")]
     free: list[FreePhases | None] = [None] * len(policies)
     if free_robots > 0:
-        uncoupled = dataclasses.replace(settings, phase_init="random", coupling=0.0)
-        rollouts = run_jobs([Job(p, free_robots) for p in policies], int(round(duration_s / dt)), uncoupled,
-                            command=(command, 0.0, 0.0), record=record, seed=seed, num_threads=num_threads,
-                            progress=progress, label="obedience, sigma = 0 from random phases")
-        free = [free_phase_result(r) for r in rollouts]
+        free = [free_phase_result(r)
+                for r in rollouts(free_robots, duration_s, "random", 0.0, "obedience, sigma = 0 from random phases")]
     return [Obedience(p.name, p.orc, s, c, f) for p, s, c, f in zip(policies, started, settling, free)]
 
 
