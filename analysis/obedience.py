@@ -260,17 +260,27 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
                                     *(f"{mix[g]:.4f}" for g in gait.GAIT_LABELS)]
                                    for r in results if r.settling is not None
                                    for t, mix in zip(r.settling.times, r.settling.mix))),
-        "free_csv": write_csv(out / f"{FILE_STEM}_free_phases.csv",
-                              ["policy", "orc", "robots", "rpd_distance_median_rad", "no_rpd", "label_agreement",
-                               "velocity_mps", "falls", "identical_robots", "settling_light_leg"],
-                              ([r.policy, r.orc, r.free.robots, f"{r.free.rpd_distance:.4f}", f"{r.free.invalid:.4f}",
-                                f"{r.free.label_agreement:.4f}", f"{r.free.velocity:.4f}", r.free.falls,
-                                int(r.free.identical), f"{r.settling.light_leg:.4f}" if r.settling else ""]
-                               for r in results if r.free is not None)),
+        "policies_csv": write_csv(out / f"{FILE_STEM}_policies.csv",
+                                  ["policy", "orc", "obeys", "sigma1_regular_at_10s", "sigma1_median_settle_s",
+                                   "sigma1_velocity_error_mps", "sigma1_grf_shares", "sigma1_light_leg",
+                                   "free_rpd_distance_median_rad", "free_no_rpd", "free_label_agreement",
+                                   "free_velocity_mps", "falls"],
+                                  (_policy_row(r) for r in results)),
     }
     with paper_style():
         files.update(save_figure(plot(results), out, FILE_STEM))
     return {"files": files, "results": results, "sizes": dict(sizes), "settings": settings.describe()}
+
+
+def _policy_row(r: Obedience) -> list:
+    """One policy's line of obedience_policies.csv (empty cells for what was not measured)."""
+    st, fr = r.settling, r.free
+    settling = ([f"{st.regular_at_10s:.4f}", f"{st.median_settle_s:g}", f"{st.velocity_error:.4f}",
+                 "/".join(f"{x:.3f}" for x in st.leg_shares), f"{st.light_leg:.4f}"] if st else [""] * 5)
+    free = ([f"{fr.rpd_distance:.4f}", f"{fr.invalid:.4f}", f"{fr.label_agreement:.4f}", f"{fr.velocity:.4f}"]
+            if fr else [""] * 4)
+    falls = sum(s.falls for s in r.started.values()) + (st.falls if st else 0) + (fr.falls if fr else 0)
+    return [r.policy, r.orc, int(r.obeys()), *settling, *free, falls]
 
 
 def plot(results: list[Obedience]):

@@ -165,3 +165,8 @@ def test_the_report_shows_free_phases_and_light_legs():
     row = next(line for line in section.splitlines() if line.startswith("| 111 |"))
     assert "| 25 % |" in row  # robot 1's light leg
     assert f"| {result.free.rpd_distance:.2f} rad ({100 * result.free.label_agreement:.0f} %) |" in row
+    row = obedience._policy_row(result)  # obedience_policies.csv
+    # robot 1's RH never passes the touchdown threshold: 3 of 4 coupled robots regular, under the 80 % goal
+    assert row[:4] == ["ORC_111/seed0", "111", 0, "0.7500"] and row[7] == "0.2500" and row[-1] == 0
+    assert float(row[8]) == pytest.approx(result.free.rpd_distance, abs=1e-4)
+    assert obedience._policy_row(obedience.Obedience("p", "110", started))[3:12] == [""] * 9
