@@ -301,8 +301,8 @@ def smallest_sizes(monkeypatch):
     monkeypatch.setattr(balanced_legs, "QUICK", {"robots_per_policy": 2, "duration_s": 1.0})
     monkeypatch.setattr(gait_emergence, "QUICK", {"runs": 2, "duration_s": 5.0})
     monkeypatch.setattr(pace_to_trot, "QUICK", {"runs": 2, "duration_s": 5.0})
-    monkeypatch.setattr(obedience, "QUICK", {"robots": 2, "duration_s": 5.0, "settle_robots": 2,
-                                             "settle_duration_s": 5.0})
+    # every key of the real QUICK cut down, so a size added to the protocol cannot be missed here
+    monkeypatch.setattr(obedience, "QUICK", {key: 5.0 if key.endswith("duration_s") else 2 for key in obedience.QUICK})
     monkeypatch.setattr(envelope, "QUICK", {"robots": 1, "warmup_s": 0.1, "measure_s": 5.0})
     monkeypatch.setattr(envelope, "ENVELOPE", {name: envelope.ENVELOPE[name] for name in ("stand", "forward 1")})
     monkeypatch.setattr(disturbance, "QUICK_MAGNITUDES", (2.0,))
