@@ -4,21 +4,27 @@ Per policy and impulse magnitude A, a "push ball" of robots: slot k (of 50) and 
 robot n = 36 k + j. One control step with zero command (the released scripts' env creation), then a
 3 m/s forward command; 5 s of settling, then a 10 s test window. Just before test step 100 + k,
 the robots of slot k get A (cos theta_j, sin theta_j) added to their world-frame trunk velocity, so
-the 50 slots sample the gait phase every 0.01 s over 0.5 s. Directions as in the released code,
+the 50 slots sample the gait phase every 0.01 s over 0.5 s. A ball with fewer slots (--push_slots,
+--quick) spreads them over the same 0.5 s, so it still samples a whole gait cycle, more coarsely. Directions as in the released code,
 theta_j = 2 pi j / 35 for j = 0..35 (0 and 360 degrees both, about 10.3 degrees apart);
 `direction_mode="even"` gives 10-degree spacing as the paper's text says.
 
-A robot fails if it terminated (trunk contact) at any step from the 3 m/s command up to the
+The command is the protocol's 3 m/s only where every policy was trained on it: a policy trained on
+slower commands (cpu_oscillators: v_x in {1, 2} m/s) would be pushed outside its task, and its
+failures would measure that. So by default robots are pushed at the highest forward command all
+policies were trained on, capped at 3 m/s (`push_command`); --push_command sets it.
+
+A robot fails if it terminated (trunk contact) at any step from the command up to the
 test sample the released analysis reads (index 998 of 1000, the second to last): the same event
 as its logged command being reset to 0 there. Falls before the pushes count as well (reported
-separately). Per policy: failure rate in %; per configuration: mean +- population std over its
+separately, with their share: the protocol wants them under 1 %). Per policy: failure rate in %; per configuration: mean +- population std over its
 policies, one decimal, lowest mean in each row bold (ties all bold), as in Table I.
 
 Magnitudes are simulated side by side in one batch, each on fresh robots (the released sweep ran
 them one after another on the same robots; fresh starts are the cleaner choice the protocol
 allows).
 
-Usage: python -m analysis.disturbance --runs DIR --out DIR [--quick] [--push_slots N]
+Usage: python -m analysis.disturbance --runs DIR --out DIR [--quick] [--push_slots N] [--push_command V]
 """
 
 from __future__ import annotations
@@ -46,11 +52,11 @@ class PushBall:
     slots: int = 50
     directions: int = 36
     direction_mode: str = "release"  # 'release': 2 pi j / (D - 1), j = 0..D-1; 'even': 2 pi j / D
-    command: float = 3.0  # m/s forward
+    command: float = 3.0  # m/s forward, the protocol's
     settle_s: float = 5.0
     test_s: float = 10.0
     push_at_s: float = 1.0  # first slot's push, into the test window
-    slot_interval_steps: int = 1  # control steps between consecutive slots
+    push_span_s: float = 0.5  # the slots spread over this span, at least one control step apart
     fail_sample: int = -2  # test sample whose state decides (negative: from the end)
 
     @property
@@ -65,6 +71,10 @@ class PushBall:
             return 2 * math.pi * j / self.directions
         raise ValueError(f"direction_mode {self.direction_mode!r} is unknown; use 'release' or 'even'")
 
+    def slot_interval_steps(self, dt: float) -> int:
+        """Control steps between consecutive slots."""
+        return max(1, int(round(self.push_span_s / dt)) // self.slots)
+
     def timeline(self, dt: float) -> dict:
         """Control-step indices. Step 0 has a zero command; the command is set before step 1."""
         settle, test = int(round(self.settle_s / dt)), int(round(self.test_s / dt))
@@ -72,7 +82,7 @@ class PushBall:
         fail = self.fail_sample if self.fail_sample >= 0 else test + self.fail_sample
         if not 0 <= fail < test:
             raise ValueError(f"fail_sample {self.fail_sample} is outside the {test}-step test window")
-        last_push = push0 + (self.slots - 1) * self.slot_interval_steps
+        last_push = push0 + (self.slots - 1) * self.slot_interval_steps(dt)
         if last_push > settle + test:
             raise ValueError("the pushes do not fit in the test window")
         return {
@@ -90,7 +100,7 @@ class PushBall:
         """(push_step (N,), push_delta (N, 2)) for robot n = directions * slot + direction."""
         n = np.arange(self.robots)
         slot, direction = n // self.directions, n % self.directions
-        step = self.timeline(dt)["first_push"] + slot * self.slot_interval_steps
+        step = self.timeline(dt)["first_push"] + slot * self.slot_interval_steps(dt)
         theta = self.angles()[direction]
         return step, magnitude * np.stack([np.cos(theta), np.sin(theta)], axis=1)
 
@@ -103,6 +113,25 @@ def default_ball(quick: bool, slots: int | None = None) -> PushBall:
     """The protocol's (or --quick's) ball, with `slots` push slots per direction when given."""
     ball = QUICK_BALL if quick else PROTOCOL_BALL
     return ball if slots is None else replace(ball, slots=slots)
+
+
+def trained_forward_speed(env_cfg) -> float:
+    """The highest forward command [m/s] a policy was trained on: the top choice of a choice-based
+    draw (its noise aside), else the top of the uniform range."""
+    commands = env_cfg.commands
+    return float(max(commands.lin_vel_x_choices) if commands.lin_vel_x_choices else commands.lin_vel_x[1])
+
+
+def push_command(policies, requested: float | None = None, protocol: float = PROTOCOL_BALL.command) -> float:
+    """The forward command of the push ball: `requested`, else the protocol's, lowered to the highest
+    command every policy was trained on."""
+    if requested is not None:
+        return float(requested)
+    trained = min(trained_forward_speed(p.env_cfg) for p in policies)
+    if trained <= 0:
+        raise ValueError(f"a policy was never trained to walk forward (top v_x command {trained:g} m/s); "
+                         "give the push ball's command with --push_command")
+    return min(protocol, trained)
 
 
 # --- scoring --------------------------------------------------------------------------------------
@@ -153,16 +182,18 @@ def format_failure_table(rates: dict, magnitudes=None, configs=None) -> str:
 
 
 def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-        push_slots: int | None = None, progress: bool = True) -> dict:
+        push_slots: int | None = None, command: float | None = None, progress: bool = True) -> dict:
     """Push-ball every policy at every magnitude; write CSVs, Table I (markdown) and figures.
 
     `push_slots` resizes the default ball to that many slots per direction: fewer robots, the same
-    directions, magnitudes and timing.
+    directions, magnitudes and push span. `command` [m/s] overrides `push_command`'s choice.
     """
     if not policies:
         raise ValueError("disturbance needs at least one policy")
     magnitudes = QUICK_MAGNITUDES if quick else MAGNITUDES
-    ball = default_ball(quick, push_slots)
+    ball = replace(default_ball(quick, push_slots), command=push_command(policies, command))
+    command_source = ("requested" if command is not None else
+                      "protocol" if ball.command == PROTOCOL_BALL.command else "trained range")
     dt = 1.0 / policies[0].env_cfg.control.frequency_hz
     tl = ball.timeline(dt)
     out = Path(out_dir)
@@ -216,7 +247,7 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
                              for m, (mean, std, n) in stats[c].items()))
 
     with paper_style():
-        figs = save_figure(plot_failure_rates(stats, magnitudes), out, f"{FILE_STEM}_failure_rate")
+        figs = save_figure(plot_failure_rates(stats, magnitudes, ball.command), out, f"{FILE_STEM}_failure_rate")
         vel = {c: np.mean([r["vx_test"] for r in records if r["config"] == c and r["magnitude"] == max(magnitudes)],
                           axis=0) for c in configs}
         t0 = tl["test_start"]
@@ -232,14 +263,18 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
         "rates": rates,
         "stats": stats,
         "falls_before_push": {c: sum(r["falls_before_push"] for r in records if r["config"] == c) for c in configs},
+        "falls_before_push_pct": {c: 100.0 * sum(r["falls_before_push"] for r in records if r["config"] == c)
+                                  / sum(r["robots"] for r in records if r["config"] == c) for c in configs},
         "sizes": {"robots_per_policy_and_impulse": ball.robots, "slots": ball.slots, "directions": ball.directions,
                   "direction_mode": ball.direction_mode, "settle_s": ball.settle_s, "test_s": ball.test_s,
-                  "magnitudes": list(magnitudes), "command_mps": ball.command},
+                  "magnitudes": list(magnitudes), "command_mps": ball.command, "protocol_command_mps": PROTOCOL_BALL.command,
+                  "command_source": command_source,
+                  "push_span_s": ball.push_span_s, "slot_interval_s": ball.slot_interval_steps(dt) * dt},
         "settings": settings.describe(),
     }
 
 
-def plot_failure_rates(stats: dict, magnitudes):
+def plot_failure_rates(stats: dict, magnitudes, command: float):
     fig, ax = plt.subplots(figsize=(COLUMN_WIDTH, 2.7), layout="constrained")
     configs = list(stats)
     spread = 0.03 * (max(magnitudes) - min(magnitudes) + 0.5)
@@ -255,7 +290,7 @@ def plot_failure_rates(stats: dict, magnitudes):
     ax.set_xticks(list(magnitudes))
     ax.set_ylim(bottom=0)
     fig.legend(ncols=4, frameon=False, loc="outside lower center", handlelength=1.5, columnspacing=1.0)
-    ax.set_title("Failure rate after a planar velocity impulse\n(3 m/s command; mean ± std over policies)")
+    ax.set_title(f"Failure rate after a planar velocity impulse\n({command:g} m/s command; mean ± std over policies)")
     return fig
 
 

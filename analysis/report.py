@@ -130,13 +130,15 @@ def table_claims(rates: dict) -> list[str]:
 
 
 def build(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSettings(), seed: int = 0,
-          source: str = "", progress: bool = True, push_slots: int | None = None) -> dict:
+          source: str = "", progress: bool = True, push_slots: int | None = None,
+          push_command: float | None = None) -> dict:
     """Run every analysis on `policies` (PolicyRun list) and write the figures, CSVs and report.md."""
     policies = [p for p in policies if p.task == DEFAULT_TASK]
     if not policies:
         raise ValueError(f"no {DEFAULT_TASK} runs (env.yaml with osc.orc) to analyse")
     # A push ball that does not fit its test window fails now, not after half an hour of other analyses.
     disturbance.default_ball(quick, push_slots).timeline(1.0 / policies[0].env_cfg.control.frequency_hz)
+    disturbance.push_command(policies, push_command)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     started = datetime.datetime.now()
@@ -153,7 +155,8 @@ def build(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalS
     del collected
     ob = obedience.run(policies, out, quick, settings, seed, progress=progress)
     ev = envelope.run(policies, out, quick, settings, seed, progress=progress)
-    db = disturbance.run(policies, out, quick, settings, seed, push_slots=push_slots, progress=progress)
+    db = disturbance.run(policies, out, quick, settings, seed, push_slots=push_slots, command=push_command,
+                         progress=progress)
 
     results = {"fixed_points": fp, "balanced_legs": bl, "gait_emergence": ge, "pace_to_trot": pt,
                "obedience": ob, "envelope": ev, "disturbance": db}
@@ -346,19 +349,34 @@ def _section_envelope(ev: dict) -> list[str]:
     return md
 
 
+PRE_PUSH_FALLS_LIMIT_PCT = 1.0  # the protocol's bound on robots falling before any push
+
+
+def _command_note(sizes: dict) -> str:
+    if sizes["command_source"] == "trained range":
+        return (f" (the protocol's {sizes['protocol_command_mps']:g} m/s lies outside the trained commands; "
+                "this is the highest forward command every policy was trained on)")
+    if sizes["command_source"] == "requested" and sizes["command_mps"] != sizes["protocol_command_mps"]:
+        return f" (--push_command; the protocol's is {sizes['protocol_command_mps']:g} m/s)"
+    return ""
+
+
 def _section_disturbance(db: dict) -> list[str]:
     s = db["sizes"]
     md = ["## 5. Disturbance rejection (Table I, protocol §6)", "",
           f"Per policy and impulse: {s['robots_per_policy_and_impulse']} robots ({s['slots']} slots × "
-          f"{s['directions']} directions, {s['direction_mode']} spacing), {s['command_mps']:g} m/s command, "
+          f"{s['directions']} directions, {s['direction_mode']} spacing; one slot every {s['slot_interval_s']:g} s "
+          f"over {s['push_span_s']:g} s), {s['command_mps']:g} m/s command{_command_note(s)}, "
           f"{s['settle_s']:g} s settling, {s['test_s']:g} s test window; failure = termination from the command "
           "to the second-to-last test sample. Mean ± population std over the policies of each configuration; "
           "bold = lowest mean of the row. Figures: `disturbance_failure_rate.png`, `disturbance_velocity.png`.", "",
           "**This reproduction:**", "", db["table_markdown"], "", "**Paper (Table I):**", "", paper_table_markdown(), ""]
-    falls = db.get("falls_before_push", {})
-    if any(falls.values()):
-        md += ["Falls before the first push (counted as failures, as in the released analysis): "
-               + ", ".join(f"ORC({c}) {n}" for c, n in falls.items()), ""]
+    falls, shares = db["falls_before_push"], db["falls_before_push_pct"]
+    over = [c for c, pct in shares.items() if pct >= PRE_PUSH_FALLS_LIMIT_PCT]
+    md += ["Falls before the first push (counted as failures, as in the released analysis): "
+           + ", ".join(f"ORC({c}) {falls[c]} ({shares[c]:.1f} %)" for c in falls)
+           + (f". Above the protocol's {PRE_PUSH_FALLS_LIMIT_PCT:g} % for ORC "
+              + ", ".join(over) + ": their failure rates count robots that fell unpushed." if over else "."), ""]
     claims = table_claims(db["rates"])
     if claims:
         md += ["Claims of the paper, checked on these numbers:", ""] + [f"- {line}" for line in claims] + [""]
@@ -393,7 +411,8 @@ def main(argv=None) -> int:
         if skipped:
             source += " (skipped, not complete runs: " + "; ".join(f"{path}: {lacks}" for path, lacks in skipped) + ")"
         result = build(policies, args.out, quick=args.quick, seed=args.seed, source=source,
-                       settings=EvalSettings(process_noise_std=args.process_noise), push_slots=args.push_slots)
+                       settings=EvalSettings(process_noise_std=args.process_noise), push_slots=args.push_slots,
+                       push_command=args.push_command)
         print(f"report: {result['report']}")
         return 0
 

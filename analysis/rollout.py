@@ -475,6 +475,9 @@ def build_parser(prog: str, description: str, out_default: str | None = None, pu
                             help="Table I's push slots per direction (protocol: 50, i.e. 1800 robots per policy "
                                  "and impulse; 4 with --quick); 10 fits seven policies into about a quarter of "
                                  "an hour on 2 cores")
+        parser.add_argument("--push_command", type=cli.number(0.0, low_open=True), default=None, metavar="V",
+                            help="Table I's forward command [m/s] (default: the protocol's 3, or the highest "
+                                 "forward command every policy was trained on if lower)")
     return parser
 
 
@@ -489,7 +492,8 @@ def runs_from_args(args) -> list[PolicyRun]:
 def cli_main(prog: str, description: str, run_fn, argv=None, pushes: bool = False) -> int:
     """`python -m analysis.<module>`: load the runs, call run_fn(runs, out, quick, settings, seed), print paths.
 
-    With `pushes`, --push_slots is offered and handed to run_fn as `push_slots`. Errors take learning.cli's
+    With `pushes`, --push_slots and --push_command are offered and handed to run_fn as `push_slots` and
+    `command`. Errors take learning.cli's
     one error path: one line on stderr, no traceback (unless --debug).
     """
     from learning import cli
@@ -500,7 +504,7 @@ def cli_main(prog: str, description: str, run_fn, argv=None, pushes: bool = Fals
         runs = runs_from_args(args)
         cli.check_writable(args.out)  # before the rollouts, which take minutes
         settings = EvalSettings(process_noise_std=args.process_noise)
-        extra = {"push_slots": args.push_slots} if pushes else {}
+        extra = {"push_slots": args.push_slots, "command": args.push_command} if pushes else {}
         summary = run_fn(runs, args.out, quick=args.quick, settings=settings, seed=args.seed, **extra)
         for key, value in summary.get("files", {}).items():
             print(f"{key}: {value}")

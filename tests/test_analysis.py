@@ -4,6 +4,7 @@ The gait metrics themselves (touchdowns, RPD, classification) are tested in test
 """
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -63,15 +64,40 @@ def test_push_ball_timeline_and_layout_match_the_protocol():
     assert np.diff(even) == pytest.approx(np.full(35, PI / 18))
 
 
-def test_fewer_push_slots_keep_the_directions_and_the_timing():
+def test_fewer_push_slots_keep_the_directions_and_the_half_second_span():
     ball = disturbance.default_ball(quick=False, slots=10)
     assert ball.robots == 360 and ball.directions == disturbance.PROTOCOL_BALL.directions
     small, full = ball.timeline(0.01), disturbance.PROTOCOL_BALL.timeline(0.01)
-    assert small["last_push"] == full["first_push"] + 9
+    # 10 slots 0.05 s apart cover the protocol's 0.5 s (50 slots 0.01 s apart): a whole gait cycle either way
+    assert ball.slot_interval_steps(0.01) == 5 and disturbance.PROTOCOL_BALL.slot_interval_steps(0.01) == 1
+    assert small["last_push"] == full["first_push"] + 45 and full["last_push"] == full["first_push"] + 49
     assert {k: v for k, v in small.items() if k != "last_push"} == {k: v for k, v in full.items() if k != "last_push"}
+    step, _ = ball.pushes(2.0, 0.01)
+    assert sorted(set(step.tolist())) == list(range(full["first_push"], full["first_push"] + 46, 5))
     assert disturbance.default_ball(quick=True) is disturbance.QUICK_BALL
     with pytest.raises(ValueError, match="do not fit"):
         disturbance.default_ball(quick=False, slots=2000).timeline(0.01)
+
+
+def _osc_policy(profile):
+    from gym_envs.registry import env_cfg_class, train_cfg_class
+    from learning.runner_config import apply_split_overrides, profile_overrides
+
+    env_cfg, _ = apply_split_overrides(env_cfg_class("mini_cheetah_osc")(), train_cfg_class("mini_cheetah_osc")(),
+                                       profile_overrides(profile, "mini_cheetah_osc"))
+    return SimpleNamespace(env_cfg=env_cfg)
+
+
+def test_push_command_stays_inside_every_policys_trained_commands():
+    paper, recipe = _osc_policy(None), _osc_policy("cpu_oscillators")
+    assert disturbance.trained_forward_speed(paper.env_cfg) == 3.0  # v_x in {-3, -1, 0, 1, 3}
+    assert disturbance.trained_forward_speed(recipe.env_cfg) == 2.0  # v_x in {1, 2}
+    assert disturbance.push_command([paper]) == 3.0  # the protocol's
+    assert disturbance.push_command([paper, recipe]) == 2.0  # not outside the recipe's task
+    assert disturbance.push_command([paper, recipe], requested=3.0) == 3.0
+    backwards = SimpleNamespace(env_cfg=SimpleNamespace(commands=SimpleNamespace(lin_vel_x_choices=(), lin_vel_x=(-1.0, 0.0))))
+    with pytest.raises(ValueError, match="--push_command"):
+        disturbance.push_command([backwards])
 
 
 def test_mean_std_is_population_std():

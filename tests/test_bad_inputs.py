@@ -139,7 +139,8 @@ ANALYSIS_FLAGS = {
     "--process_noise": [["--process_noise", "-1"], ["--process_noise", "nan"]],
     "--seed": [["--seed", "-1"]],
 }
-PUSH_FLAGS = {**ANALYSIS_FLAGS, "--push_slots": [["--push_slots", "0"], ["--push_slots", "100000"]]}  # too many to fit
+PUSH_FLAGS = {**ANALYSIS_FLAGS, "--push_slots": [["--push_slots", "0"], ["--push_slots", "100000"]],  # too many to fit
+              "--push_command": [["--push_command", "0"], ["--push_command", "nan"]]}
 PUSHING = {"analysis.report", "analysis.disturbance"}
 FIXED_POINTS_FLAGS = {"--debug": bool_flag("--debug"), "--out": [["--out", "a_file"]], "--quick": bool_flag("--quick")}
 

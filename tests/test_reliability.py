@@ -325,7 +325,9 @@ def test_a_tiny_quick_run_of_every_analysis(module, tiny_run, tmp_path, capsys, 
     if module != "fixed_points":
         assert f"skipped {root / 'ORC_111' / 'no_env_yaml'}: no env.yaml" in captured.err
     if module == "report":
-        assert "no_env_yaml: no env.yaml" in (out / "report.md").read_text()
+        text = (out / "report.md").read_text()
+        assert "no_env_yaml: no env.yaml" in text
+        assert "Falls before the first push" in text and "over 0.5 s)" in text  # reported even when none fell
 
 
 # --- 6, 7: empty environment variables, incomplete run folders ---------------------------------------------
