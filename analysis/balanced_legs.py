@@ -115,6 +115,8 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
         stats[c]["policy_max_deviation"] = [mean_max_deviation(g) for g in per_policy[c]]
         for name, statistic in POLICY_STATISTICS.items():
             stats[c][f"{name}_interval"] = policy_interval(per_policy[c], statistic)
+        stats[c]["leg_mean_interval"] = [policy_interval(per_policy[c], lambda g, j=j: g[:, j].mean())
+                                         for j in range(len(LEG_NAMES))]
 
     spreads = ("median", "iqr")
     summary_csv = write_csv(
@@ -125,7 +127,7 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
           *(f"{s[what][j]:.4f}" for j in range(len(LEG_NAMES)) for what in spreads)] for c, s in stats.items()))
 
     with paper_style():
-        fig = plot(pooled)
+        fig = plot(pooled, {c: stats[c]["leg_mean_interval"] for c in configs}, n_policies)
     figs = save_figure(fig, out, FILE_STEM)
     return {
         "files": {"csv": per_robot_csv, "summary_csv": summary_csv, **figs},
@@ -136,8 +138,10 @@ def run(policies, out_dir, quick: bool = False, settings: EvalSettings = EvalSet
     }
 
 
-def plot(pooled: dict[str, np.ndarray]):
-    """One violin per (configuration, leg); configurations along x, legs side by side within a group."""
+def plot(pooled: dict[str, np.ndarray], leg_intervals: dict[str, list], policies: dict[str, int]):
+    """One violin per (configuration, leg) over the pooled robots; configurations along x, legs side by
+    side within a group; on each violin the mean over policies with its 95 % interval (leg_intervals:
+    per configuration, (estimate, low, high) per leg)."""
     configs = list(pooled)
     fig, ax = plt.subplots(figsize=(COLUMN_WIDTH, 2.4), constrained_layout=True)
     slot, group = 0.2, 1.0
@@ -149,6 +153,9 @@ def plot(pooled: dict[str, np.ndarray]):
             values = data[:, j]
             top = max(top, float(values.max()) * 1.05 if len(values) else top)
             _violin(ax, x, values, LEG_COLORS[j], width=slot * 0.95)
+            estimate, low, high = leg_intervals[c][j]
+            ax.errorbar(x, estimate, yerr=[[estimate - low], [high - estimate]], fmt="o", ms=1.6, color="black",
+                        elinewidth=0.7, capsize=1.2, zorder=3)
     ax.axhline(BALANCED, color="0.3", lw=0.6, ls="--", zorder=0)
     ax.text(len(configs) - 0.5, BALANCED, " 0.25", va="center", ha="left", fontsize=6, color="0.3",
             clip_on=False)
@@ -163,7 +170,9 @@ def plot(pooled: dict[str, np.ndarray]):
     handles = [plt.Rectangle((0, 0), 1, 1, fc=col, alpha=0.6, ec=col) for col in LEG_COLORS]
     ax.legend(handles, LEG_NAMES, ncols=4, loc="upper left", frameon=False, handlelength=1.0, columnspacing=0.8)
     n = {len(v) for v in pooled.values()}
-    ax.set_title(f"Leg use at 1 m/s, {'/'.join(map(str, sorted(n)))} robots per configuration")
+    k = sorted(set(policies.values()))
+    ax.set_title(f"Leg use at 1 m/s, {'/'.join(map(str, sorted(n)))} robots per configuration\n"
+                 f"(dots: mean over {'/'.join(map(str, k))} policies, 95 % interval)")
     return fig
 
 

@@ -172,6 +172,24 @@ def test_balanced_leg_statistic_on_synthetic_grf():
         balanced_legs.mean_grf_per_leg(trot)
 
 
+def test_leg_use_figure_marks_each_legs_mean_over_policies_with_its_interval():
+    import matplotlib.pyplot as plt
+    from analysis.stats import policy_interval
+
+    rng = np.random.default_rng(0)
+    # Two policies that load RF differently: the interval over policies must span both of their means.
+    policies = [np.clip(0.25 + 0.02 * rng.standard_normal((50, 4)) + [[shift, 0, 0, 0]], 0, 1) for shift in (-0.1, 0.1)]
+    intervals = [policy_interval(policies, lambda g, j=j: g[:, j].mean()) for j in range(4)]
+    low, high = intervals[0][1:]
+    assert low < policies[0][:, 0].mean() + 0.02 and high > policies[1][:, 0].mean() - 0.02
+    assert intervals[1][2] - intervals[1][1] < 0.05  # the legs the policies agree on: narrow
+    fig = balanced_legs.plot({"111": np.concatenate(policies)}, {"111": intervals}, {"111": 2})
+    bars = fig.axes[0].containers
+    assert [b.lines[0].get_ydata()[0] for b in bars] == pytest.approx([i[0] for i in intervals])
+    assert "mean over 2 policies" in fig.axes[0].get_title()
+    plt.close(fig)
+
+
 # --- gait emergence and pace to trot --------------------------------------------------------------
 
 
