@@ -169,7 +169,7 @@ def _main(args) -> int:
             launch.resolve(run_request(args, orc, seed))
     os.makedirs(args.out, exist_ok=True)
     with runs.FolderLock(args.out, "wait for that sweep to end (or stop it), or choose another --out"), \
-            StopRequest() as stop:
+            StopRequest() as stop, launch.torch_threads(args.num_threads):
         for orc in args.orcs:
             for seed in args.seeds:
                 outcome = "stopped" if stop.requested else train_one(args, orc, seed, stop)

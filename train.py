@@ -119,8 +119,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
-    import torch
-
     from learning import distributed, launch, runs
     from learning.machine import expected_duration
     from learning.runner import StopRequest
@@ -129,43 +127,40 @@ def _main(args: argparse.Namespace) -> int:
         from learning.video import prefer_offscreen_gl
 
         prefer_offscreen_gl()  # before mujoco is imported
-    threads_before = torch.get_num_threads()
-    lock = None
-    try:
-        if args.num_threads:
-            torch.set_num_threads(args.num_threads)
-        plan = launch.resolve(launch.RunRequest.from_args(args))
-        if args.print_config:
-            print(cli.config_yaml(plan.env_cfg, plan.train_cfg), end="")
-            return 0
-        runner, run_dir, lock = launch.start_run(plan)
-        env_cfg, train_cfg = plan.env_cfg, plan.train_cfg
-        if plan.rank == 0:
-            resuming = f" (resuming {train_cfg.resumed_from})" if train_cfg.resumed_from else ""
-            print(plan.defaults.describe(env_cfg.sim.backend))
-            print(expected_duration(env_cfg.env.device.split(":")[0], env_cfg.sim.backend, env_cfg.env.num_envs,
-                                    train_cfg.num_steps_per_env,
-                                    train_cfg.max_iterations - runner.current_learning_iteration, plan.world,
-                                    mirrored=train_cfg.algorithm.symmetry_cfg.use_data_augmentation))
-            print(f"task {plan.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
-            for start_step, changes in env_cfg.second_stages():
-                print(f"second stage from iteration {-(-start_step // train_cfg.num_steps_per_env)}: {changes}")
-            print(f"run folder {run_dir}{resuming}", flush=True)
+    with launch.torch_threads(args.num_threads):
+        lock = None
+        try:
+            plan = launch.resolve(launch.RunRequest.from_args(args))
+            if args.print_config:
+                print(cli.config_yaml(plan.env_cfg, plan.train_cfg), end="")
+                return 0
+            runner, run_dir, lock = launch.start_run(plan)
+            env_cfg, train_cfg = plan.env_cfg, plan.train_cfg
+            if plan.rank == 0:
+                resuming = f" (resuming {train_cfg.resumed_from})" if train_cfg.resumed_from else ""
+                print(plan.defaults.describe(env_cfg.sim.backend))
+                print(expected_duration(env_cfg.env.device.split(":")[0], env_cfg.sim.backend, env_cfg.env.num_envs,
+                                        train_cfg.num_steps_per_env,
+                                        train_cfg.max_iterations - runner.current_learning_iteration, plan.world,
+                                        mirrored=train_cfg.algorithm.symmetry_cfg.use_data_augmentation))
+                print(f"task {plan.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
+                for start_step, changes in env_cfg.second_stages():
+                    print(f"second stage from iteration {-(-start_step // train_cfg.num_steps_per_env)}: {changes}")
+                print(f"run folder {run_dir}{resuming}", flush=True)
 
-        with StopRequest(announce=plan.rank == 0) as stop:
-            finished = runner.learn(train_cfg.max_iterations - runner.current_learning_iteration,
-                                    train_cfg.init_at_random_ep_len, stop)
-        if finished:
-            return 0
-        if plan.rank == 0:
-            saved = runs.checkpoint_path(run_dir, runner.current_learning_iteration)
-            print(f"stopped at iteration {runner.current_learning_iteration}; saved {saved}", flush=True)
-        return stop.exit_status
-    finally:
-        if lock is not None:
-            lock.release()
-        torch.set_num_threads(threads_before)
-        distributed.shut_down()
+            with StopRequest(announce=plan.rank == 0) as stop:
+                finished = runner.learn(train_cfg.max_iterations - runner.current_learning_iteration,
+                                        train_cfg.init_at_random_ep_len, stop)
+            if finished:
+                return 0
+            if plan.rank == 0:
+                saved = runs.checkpoint_path(run_dir, runner.current_learning_iteration)
+                print(f"stopped at iteration {runner.current_learning_iteration}; saved {saved}", flush=True)
+            return stop.exit_status
+        finally:
+            if lock is not None:
+                lock.release()
+            distributed.shut_down()
 
 
 if __name__ == "__main__":

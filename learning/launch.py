@@ -12,6 +12,7 @@ program fills it directly), so nothing assembles a command line for the parser.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import os
 import random
@@ -58,6 +59,21 @@ def _cuda_available() -> bool:
     import torch
 
     return torch.cuda.is_available()
+
+
+@contextlib.contextmanager
+def torch_threads(num_threads: int | None):
+    """torch's CPU threads capped at --num_threads while the block runs (0 or None: torch's default), then restored,
+    so that a training beside another on the same cores does not run twice as many busy threads as cores."""
+    import torch
+
+    before = torch.get_num_threads()
+    if num_threads:
+        torch.set_num_threads(num_threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def seed_everything(seed: int) -> None:

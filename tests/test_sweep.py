@@ -100,3 +100,24 @@ def test_sigterm_stops_the_sweep_with_a_checkpoint_and_the_next_sweep_resumes_it
     assert sweep.main(["--out", str(tmp_path), "--orcs", "111", "--seeds", "3", "--max_iterations", str(last + 1),
                        *TINY]) == 0
     assert runs.list_checkpoints(run_dir)[-1] == last + 1
+
+
+def test_num_threads_caps_torch_while_the_sweep_trains(tmp_path, monkeypatch):
+    # Two sweeps side by side with --num_threads 1 must each run one busy torch thread, not one per core.
+    from learning.runner import TaskRunner
+
+    seen = []
+    learn = TaskRunner.learn
+
+    def spy(self, *args, **kwargs):
+        seen.append(torch.get_num_threads())
+        return learn(self, *args, **kwargs)
+
+    monkeypatch.setattr(TaskRunner, "learn", spy)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        assert sweep.main(["--out", str(tmp_path), "--orcs", "111", "--seeds", "0", *TINY, "--max_iterations", "1"]) == 0
+        assert seen == [1] and torch.get_num_threads() == 2  # capped while training, restored after
+    finally:
+        torch.set_num_threads(before)
