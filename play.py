@@ -9,10 +9,10 @@
 Which policy. --load_run (a run folder name or path) and --checkpoint (iteration, -1 newest)
 pick it; otherwise the newest run with a checkpoint under the log root, restricted to
 --experiment_name, --task and --orc when given. If there is none and --orc is given, the shipped
-policy in resources/policies/ORC_<orc>/ (env.yaml, train.yaml, model_*.pt) is used; --shipped
-always plays the shipped one. The first line printed names the checkpoint, its iteration and why
-it was chosen. --print_config prints the resolved env config (and the run's train config) as
-YAML and exits.
+policy in resources/policies/ORC_<orc>/seed0/ (env.yaml, train.yaml, model_*.pt) is used; --shipped
+always plays the shipped one (another shipped seed: --load_run resources/policies/ORC_<orc>/seed<k>).
+The first line printed names the checkpoint, its iteration and why it was chosen. --print_config prints
+the resolved env config (and the run's train config) as YAML and exits.
 
 What it runs. The env is rebuilt from the run's env.yaml (the task name comes from its
 train.yaml) and changed for evaluation:
@@ -35,7 +35,7 @@ display, a passive MuJoCo viewer shows robot 0: arrow keys up/down change v_x by
 left/right the yaw rate by 0.5 rad/s, comma/period v_y by 0.25 m/s; it runs until the window
 closes unless --duration is given. --export writes the TorchScript and ONNX policy (input: the
 actor observation, batch 1 for ONNX; output: actions) to <run>/exported/, or for a shipped
-policy to <log_root>/shipped/ORC_<orc>/exported/ (resources/ is never written): both ONNX files
+policy to <log_root>/shipped/ORC_<orc>/seed<k>/exported/ (resources/ is never written): both ONNX files
 carry deployment metadata (observation terms in order with their scales, action scale, default
 joint positions, Kp/Kd, control and physics rates, ORC and oscillator constants), and for
 oscillator tasks controller.onnx is the whole controller in one graph (raw readings, per-substep
@@ -76,7 +76,7 @@ def build_parser() -> cli.Parser:
     p.add_argument("--task", help="task name; optional when a run is found (read from its train.yaml)")
     p.add_argument("--orc", type=cli.orc, help="pick the newest run with this ORC string (or the shipped ORC_<orc> "
                    "policy)")
-    p.add_argument("--shipped", action="store_true", help="play the shipped policy resources/policies/ORC_<orc> "
+    p.add_argument("--shipped", action="store_true", help="play the shipped policy resources/policies/ORC_<orc>/seed0 "
                    "(--orc, default 111) even when runs exist")
     cli.add_run_selection(p, "play")
     p.add_argument("--num_envs", type=cli.integer(1), default=50, help="robots (default 50)")
@@ -96,7 +96,7 @@ def build_parser() -> cli.Parser:
     p.add_argument("--headless", action="store_true", help="never open a viewer window")
     p.add_argument("--video", metavar="FILE.mp4", type=cli.new_file(".mp4"), help="render robot 0 to this video")
     p.add_argument("--export", action="store_true", help="write exported/policy.pt, policy.onnx and controller.onnx "
-                   "(with metadata; in the run folder, for a shipped policy in <log_root>/shipped/ORC_<orc>/)")
+                   "(with metadata; in the run folder, for a shipped policy in <log_root>/shipped/ORC_<orc>/seed<k>/)")
     cli.add_print_config(p)
     return p
 

@@ -1,7 +1,7 @@
 """All figures, CSVs and Table I of the paper from a folder of trained runs, with report.md beside the paper.
 
 Runs are grouped by their ORC configuration (osc.orc of each run's env.yaml). Without --runs the
-shipped policies (resources/policies/ORC_<xyz>/) are used. --quick uses the reduced sizes of every
+shipped policies (resources/policies/ORC_<xyz>/seed<k>/) are used. --quick uses the reduced sizes of every
 module (a smoke test of the pipeline: its numbers are not comparable with the paper's).
 
 Usage: python -m analysis.report --runs DIR --out DIR [--quick] [--push_slots N]

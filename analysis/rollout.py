@@ -112,7 +112,7 @@ class StackedPolicy:
 def load_runs(root: str | None = None) -> list[PolicyRun]:
     """Every run folder under root (a run, an experiment folder, or a log root), loaded for evaluation.
 
-    root=None means the shipped policies (resources/policies/ORC_<xyz>/). The loading itself
+    root=None means the shipped policies (resources/policies/ORC_<xyz>/seed<k>/). The loading itself
     (env config from env.yaml, deterministic actor from the newest checkpoint) is learning's.
     """
     if root is None and not os.path.isdir(SHIPPED_POLICIES):

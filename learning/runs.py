@@ -472,8 +472,10 @@ def find_checkpoint(run_dir: str, checkpoint: int = -1) -> str:
     return checkpoint_path(run_dir, checkpoint)
 
 
-def shipped_policy_dir(orc: str) -> str:
-    return os.path.join(POLICY_ROOT, f"ORC_{orc}")
+def shipped_policy_dir(orc: str, seed: int = 0, root: str | None = None) -> str:
+    """resources/policies/ORC_<xyz>/seed<k>/: one folder per configuration and training seed (seed 0 is the
+    policy play and the single-policy examples use)."""
+    return os.path.join(root or POLICY_ROOT, f"ORC_{orc}", f"seed{seed}")
 
 
 def is_shipped(run_dir: str) -> bool:
@@ -481,10 +483,10 @@ def is_shipped(run_dir: str) -> bool:
 
 
 def export_dir(run_dir: str, log_root: str) -> str:
-    """Where exports of a run go: <run>/exported, and for a shipped policy <log_root>/shipped/ORC_<xyz>/exported
+    """Where exports of a run go: <run>/exported, and for a shipped policy <log_root>/shipped/ORC_<xyz>/seed<k>/exported
     (resources/ stays as the repository has it)."""
     if is_shipped(run_dir):
-        return os.path.join(log_root, "shipped", os.path.basename(run_dir), EXPORT_DIR)
+        return os.path.join(log_root, "shipped", os.path.relpath(os.path.abspath(run_dir), POLICY_ROOT), EXPORT_DIR)
     return os.path.join(run_dir, EXPORT_DIR)
 
 

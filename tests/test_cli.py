@@ -269,7 +269,7 @@ def test_play_falls_back_to_the_shipped_policy(tmp_path, capsys):
     code = play.main(["--task", "mini_cheetah_osc", "--orc", "010", "--log_root", str(tmp_path), "--headless",
                       "--num_envs", "2", "--duration", "0.2", "--num_threads", "1"])
     assert code == 0
-    assert os.path.join("resources", "policies", "ORC_010") in capsys.readouterr().out
+    assert os.path.join("resources", "policies", "ORC_010", "seed0") in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("signum, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
@@ -372,9 +372,9 @@ def test_the_shipped_policy_plays_on_request_and_exports_into_the_log_root(train
     before = snapshot(runs.POLICY_ROOT)
     assert play.main(["--shipped", "--orc", "110", "--log_root", str(tmp_path), "--headless", "--num_envs", "2",
                       "--duration", "0.05", "--num_threads", "1", "--export"]) == 0
-    shipped_iteration = max(runs.list_checkpoints(os.path.join(runs.POLICY_ROOT, "ORC_110")))
+    shipped_iteration = max(runs.list_checkpoints(runs.shipped_policy_dir("110")))
     assert f"(iteration {shipped_iteration}; the shipped ORC 110 policy)" in capsys.readouterr().out
-    assert {"policy.onnx", "policy.pt"} <= set(os.listdir(tmp_path / "shipped" / "ORC_110" / "exported"))
+    assert {"policy.onnx", "policy.pt"} <= set(os.listdir(tmp_path / "shipped" / "ORC_110" / "seed0" / "exported"))
     assert snapshot(runs.POLICY_ROOT) == before  # resources/ untouched
 
 

@@ -17,7 +17,7 @@ import torch
 
 from analysis import rollout
 from gym_envs import env_cfg_class, make_env, oscillators
-from learning import export
+from learning import export, runs
 
 from .test_export import shipped_session
 
@@ -65,7 +65,7 @@ def test_every_orc_and_the_plain_task_keep_to_the_env_device():
 def test_controller_export_and_evaluation_rollout_keep_to_their_devices(tmp_path):
     session = shipped_session(tmp_path)
     actor = session.policy.model.as_onnx(verbose=False).cpu().eval()
-    run = rollout.load_policy_run(f"{rollout.SHIPPED_POLICIES}/ORC_111")
+    run = rollout.load_policy_run(runs.shipped_policy_dir("111"))
     # torch.onnx.export itself does not run under a meta default device; what it traces is ours.
     with forgotten_device_fails():
         metadata = export.deployment_metadata(session.task)

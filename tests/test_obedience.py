@@ -7,7 +7,8 @@ import pytest
 
 from analysis import obedience
 from analysis.gait import IDEAL_GAITS, TRANSITION
-from analysis.rollout import Rollout, load_policy_run, SHIPPED_POLICIES
+from analysis.rollout import Rollout, load_policy_run
+from learning.runs import shipped_policy_dir
 
 PI = math.pi
 DT = 0.01
@@ -112,7 +113,7 @@ def shipped_3_and_16():
 
     3 robots is the size at which rows of a batch are partly handled by vector and partly by scalar
     loops, whose last-bit differences contact dynamics grow (issue 21, measured on AMD EPYC)."""
-    runs = [load_policy_run(f"{SHIPPED_POLICIES}/ORC_{orc}") for orc in ("110", "000")]
+    runs = [load_policy_run(shipped_policy_dir(orc)) for orc in ("110", "000")]
     return {robots: {r.orc: r for r in obedience.measure(runs, robots=robots, duration_s=10.0, settle_robots=robots,
                                                           settle_duration_s=5.0, progress=False, num_threads=1)}
             for robots in (3, 16)}

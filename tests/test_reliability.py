@@ -238,8 +238,8 @@ def test_a_run_from_before_a_reward_term_resumes_into_a_folder_that_loads(run_co
 def test_older_runs_keep_the_yaw_term_they_trained_with():
     # The shipped policies predate rewards.yaw_tracking and trained with the released quartic; a run that
     # names its term keeps it.
-    _, shipped, _ = runs.load_run_configs(os.path.join(runs.POLICY_ROOT, "ORC_111"))
-    assert runs.run_format(os.path.join(runs.POLICY_ROOT, "ORC_111")) == 0
+    _, shipped, _ = runs.load_run_configs(runs.shipped_policy_dir("111"))
+    assert runs.run_format(runs.shipped_policy_dir("111")) == 0
     assert shipped.rewards.yaw_tracking == "released_quartic" and shipped.osc.standing_rule == "lin_vel_x"
 
 

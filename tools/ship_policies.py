@@ -1,10 +1,13 @@
 """Copy finished sweep runs into resources/policies/ and write their manifest with measured metrics.
 
     python tools/ship_policies.py --runs logs/sweep --machine "2-core CPU (dev machine)"
+    python tools/ship_policies.py --runs logs/sweep --seed 2 --machine ...   # only the seed-2 runs
     python tools/ship_policies.py --remeasure          # measure the shipped policies again, keep provenance
 
-For each ORC_<xyz>/seed<k> run of the sweep (the first seed found per configuration unless
---seed is given): env.yaml, train.yaml and the newest checkpoint go to resources/policies/ORC_<xyz>/.
+Every ORC_<xyz>/seed<k> run of the sweep (only seed k with --seed) is shipped to
+resources/policies/ORC_<xyz>/seed<k>/: env.yaml, train.yaml and the newest checkpoint (k is the seed its
+train.yaml records). Policies shipped earlier stay, so the seeds of a sweep that spans sessions can be
+shipped as they land; a run shipped again replaces its folder and its manifest row.
 Each shipped policy is then measured at 1 m/s in the evaluation setting:
   - walking: 16 robots with random oscillator phases, 20 s after a 2 s start (analysis.locomotion):
     tracking error, falls, and the gait mix at the end both from foot contacts and from the
@@ -69,37 +72,62 @@ def ship(args) -> list[dict]:
     rows = []
     for orc in PAPER_CONFIGURATIONS:
         folder = os.path.join(args.runs, f"ORC_{orc}")
-        seeds = sorted(os.listdir(folder)) if os.path.isdir(folder) else []
+        names = sorted(os.listdir(folder)) if os.path.isdir(folder) else []
         if args.seed is not None:
-            seeds = [s for s in seeds if s == f"seed{args.seed}"]
-        if not seeds:
-            print(f"ORC {orc}: no run in {folder}; skipped")
-            continue
-        run_dir = os.path.join(folder, seeds[0])
-        iteration = max(runs.list_checkpoints(run_dir))
-        target = os.path.join(args.out, f"ORC_{orc}")
-        os.makedirs(target, exist_ok=True)
-        for old in os.listdir(target):
-            os.remove(os.path.join(target, old))
-        for name in (runs.ENV_YAML, runs.TRAIN_YAML, os.path.basename(runs.checkpoint_path(run_dir, iteration))):
-            shutil.copy2(os.path.join(run_dir, name), os.path.join(target, name))
-        loaded = runs.load_policy(target)
-        with open(os.path.join(run_dir, "sweep_status.yaml")) as f:
-            status = yaml.safe_load(f)
-        rows.append({
-            "orc": orc, "command_mps": 1.0, "commit": args.commit or runs.trained_commit(run_dir) or head,
-            "seed": loaded.train_cfg.seed, "iterations": iteration,
-            "wall_time_s": status.get("wall_time_s", ""), "machine": args.machine, "profile": loaded.train_cfg.profile,
-            **measure(target, args.num_threads),
-        })
+            names = [n for n in names if n == f"seed{args.seed}"]
+        run_dirs = [os.path.join(folder, n) for n in names if runs.is_run_dir(os.path.join(folder, n))
+                    and runs.list_checkpoints(os.path.join(folder, n))]
+        if not run_dirs:
+            print(f"ORC {orc}: no finished run in {folder}; skipped")
+        for run_dir in run_dirs:
+            rows.append(ship_run(run_dir, orc, args, head))
     return rows
 
 
+def ship_run(run_dir: str, orc: str, args, head: str) -> dict:
+    iteration = max(runs.list_checkpoints(run_dir))
+    seed = runs.load_run_configs(run_dir)[2].seed
+    target = runs.shipped_policy_dir(orc, seed, args.out)
+    os.makedirs(target, exist_ok=True)
+    for old in os.listdir(target):
+        os.remove(os.path.join(target, old))
+    for name in (runs.ENV_YAML, runs.TRAIN_YAML, os.path.basename(runs.checkpoint_path(run_dir, iteration))):
+        shutil.copy2(os.path.join(run_dir, name), os.path.join(target, name))
+    loaded = runs.load_policy(target)
+    status_path = os.path.join(run_dir, "sweep_status.yaml")  # a run trained by train.py has none
+    status = {}
+    if os.path.isfile(status_path):
+        with open(status_path) as f:
+            status = yaml.safe_load(f) or {}
+    return {
+        "orc": orc, "command_mps": 1.0, "commit": args.commit or runs.trained_commit(run_dir) or head,
+        "seed": seed, "iterations": iteration,
+        "wall_time_s": status.get("wall_time_s", ""), "machine": args.machine, "profile": loaded.train_cfg.profile,
+        **measure(target, args.num_threads),
+    }
+
+
 def remeasure(args) -> list[dict]:
-    with open(os.path.join(args.out, "manifest.csv"), newline="") as f:
-        old = list(csv.DictReader(f))
-    return [{**{k: row[k] for k in PROVENANCE}, **measure(os.path.join(args.out, f"ORC_{row['orc']}"),
-                                                          args.num_threads)} for row in old]
+    return [{**{k: row[k] for k in PROVENANCE},
+             **measure(runs.shipped_policy_dir(row["orc"], int(row["seed"]), args.out), args.num_threads)}
+            for row in read_manifest(args.out)]
+
+
+def read_manifest(out: str) -> list[dict]:
+    path = os.path.join(out, "manifest.csv")
+    if not os.path.isfile(path):
+        return []
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def merged(old: list[dict], new: list[dict]) -> list[dict]:
+    """The manifest's rows: the new ones, and the old ones no new row replaces; by configuration, then seed."""
+    key = lambda row: (str(row["orc"]), int(row["seed"]))  # noqa: E731
+    rows = {key(row): row for row in old}
+    rows.update({key(row): row for row in new})
+    order = {orc: i for i, orc in enumerate(PAPER_CONFIGURATIONS)}
+    return [rows[k] for k in sorted(rows, key=lambda k: (order.get(k[0], len(order)), k[1]))]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -118,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("give either --runs DIR (with --machine) or --remeasure")
     if args.runs and not args.machine:
         parser.error("--runs needs --machine (what trained the runs)")
-    rows = remeasure(args) if args.remeasure else ship(args)
+    rows = remeasure(args) if args.remeasure else merged(read_manifest(args.out), ship(args))
     write_csv(os.path.join(args.out, "manifest.csv"), FIELDS, ([row[k] for k in FIELDS] for row in rows))
     return 0
 

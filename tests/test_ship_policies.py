@@ -1,0 +1,51 @@
+"""tools/ship_policies.py: each seed of a sweep lands in its own folder, and shipping more seeds keeps the earlier ones."""
+
+from __future__ import annotations
+
+import csv
+import os
+import sys
+
+import pytest
+
+import sweep
+from learning import runs
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
+import ship_policies  # noqa: E402
+
+from .test_sweep import TINY  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def sweep_runs(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sweep")
+    assert sweep.main(["--out", str(out), "--orcs", "111", "--seeds", "3", "4", *TINY, "--max_iterations", "1"]) == 0
+    return out
+
+
+def manifest(out):
+    with open(os.path.join(out, "manifest.csv"), newline="") as f:
+        return [(row["orc"], row["seed"], row["iterations"], row["robots"]) for row in csv.DictReader(f)]
+
+
+def test_seeds_ship_one_at_a_time_into_their_own_folders(sweep_runs, tmp_path, monkeypatch):
+    measured = []
+
+    def measure(policy_dir, num_threads):  # the rollouts are analysis's, tested there; here only what is shipped
+        measured.append(policy_dir)
+        return {key: len(measured) for key in ship_policies.METRICS}
+
+    monkeypatch.setattr(ship_policies, "measure", measure)
+    ship = ["--runs", str(sweep_runs), "--out", str(tmp_path), "--machine", "test"]
+    assert ship_policies.main([*ship, "--seed", "4"]) == 0
+    assert manifest(tmp_path) == [("111", "4", "1", "1")]
+    assert ship_policies.main([*ship, "--seed", "3"]) == 0  # seed 4 stays shipped, seed 3 joins it
+    assert manifest(tmp_path) == [("111", "3", "1", "2"), ("111", "4", "1", "1")]
+    for seed in (3, 4):
+        folder = runs.shipped_policy_dir("111", seed, str(tmp_path))
+        assert sorted(os.listdir(folder)) == ["env.yaml", "model_1.pt", "train.yaml"]
+        assert runs.load_run_configs(folder)[2].seed == seed
+    assert ship_policies.main(["--remeasure", "--out", str(tmp_path)]) == 0
+    assert measured[-2:] == [runs.shipped_policy_dir("111", s, str(tmp_path)) for s in (3, 4)]
+    assert [row[:3] for row in manifest(tmp_path)] == [("111", "3", "1"), ("111", "4", "1")]
