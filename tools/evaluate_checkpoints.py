@@ -31,6 +31,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--checkpoints", type=int, nargs="*", default=None, help="these iterations instead")
     parser.add_argument("--robots", type=int, default=16)
     parser.add_argument("--num_threads", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0,
+                        help="evaluation seed (robots' starting phases); another seed re-measures a chosen checkpoint "
+                             "on draws it was not chosen by")
     parser.add_argument("--gait_speeds", type=float, nargs="*", default=(), metavar="V",
                         help="also the started gaits at sigma = 0 under these forward commands [m/s]")
     args = parser.parse_args(argv)
@@ -43,10 +46,10 @@ def main(argv: list[str] | None = None) -> int:
               f"(it has {available})", file=sys.stderr)
         return 1
     policies = [load_policy_run(args.run_dir, it, name=f"it {it}") for it in wanted]
-    env_results = envelope.measure(policies, robots=args.robots, num_threads=args.num_threads,
+    env_results = envelope.measure(policies, robots=args.robots, num_threads=args.num_threads, seed=args.seed,
                                    **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
     obeyed = obedience.measure(policies, robots=args.robots, settle_robots=args.robots, settle_duration_s=10.0,
-                               num_threads=args.num_threads)
+                               num_threads=args.num_threads, seed=args.seed)
     for policy, ob in zip(policies, obeyed):
         rows = [r for r in env_results if r.policy == policy.name]
         missed = [f"{r.name} ({max(r.error):.2f}{', falls' if r.falls else ''})" for r in rows if not r.met]
@@ -56,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     print("\n".join(envelope.summary_lines(env_results)))
     for speed in args.gait_speeds:
         at_speed = obedience.measure(policies, robots=args.robots, settle_robots=0, num_threads=args.num_threads,
-                                     command=speed, progress=False)
+                                     command=speed, progress=False, seed=args.seed)
         for policy, ob in zip(policies, at_speed):
             print(f"{policy.name} | command {speed:g} m/s | {ob.summary()}")
     return 0
