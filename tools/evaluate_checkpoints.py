@@ -12,6 +12,9 @@ For each checkpoint (all checkpoints batched together, 16 robots per measurement
     walked at half the command's speed or more by 80 % of the robots, 80 % regular at 10 s, no falls).
 One summary line per checkpoint on stdout, then every envelope line. --gait_speeds adds, per checkpoint
 and speed, the started gaits at sigma = 0 under that forward command (walking: at half of it or more).
+--confirm_seed chooses a checkpoint: those meeting both goals are measured again on a second evaluation
+seed, and the last one meeting both there too is named (a checkpoint chosen by one draw of robots is
+favoured by that draw; the second measurement is the unbiased one).
 """
 
 from __future__ import annotations
@@ -24,6 +27,24 @@ from analysis.rollout import load_policy_run
 from learning import runs
 
 
+def evaluate(policies, robots: int, seed: int, num_threads: int) -> dict[str, bool]:
+    """Measure the checkpoints, print a summary line each and the envelope's lines; {name: both goals met}."""
+    env_results = envelope.measure(policies, robots=robots, num_threads=num_threads, seed=seed,
+                                   **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
+    obeyed = obedience.measure(policies, robots=robots, settle_robots=robots, settle_duration_s=10.0,
+                               num_threads=num_threads, seed=seed)
+    met = {}
+    for policy, ob in zip(policies, obeyed):
+        rows = [r for r in env_results if r.policy == policy.name]
+        missed = [f"{r.name} ({max(r.error):.2f}{', falls' if r.falls else ''})" for r in rows if not r.met]
+        met[policy.name] = not missed and ob.obeys()
+        verdict = f"envelope {'yes' if not missed else 'no'}, obedience {'yes' if ob.obeys() else 'no'}"
+        print(f"{policy.name} | seed {seed} | goals: {verdict} | envelope met {len(rows) - len(missed)}/{len(rows)}"
+              f"{' | missed: ' + '; '.join(missed) if missed else ''} | {ob.summary()}", flush=True)
+    print("\n".join(envelope.summary_lines(env_results)))
+    return met
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_dir")
@@ -32,11 +53,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robots", type=int, default=16)
     parser.add_argument("--num_threads", type=int, default=0)
     parser.add_argument("--seed", type=int, default=0,
-                        help="evaluation seed (robots' starting phases); another seed re-measures a chosen checkpoint "
-                             "on draws it was not chosen by")
+                        help="evaluation seed (the robots' starting phases and draws)")
+    parser.add_argument("--confirm_seed", type=int, default=None,
+                        help="choose a checkpoint: re-measure those meeting both goals at this second evaluation "
+                             "seed (draws they were not chosen by) and name the last one meeting both again")
     parser.add_argument("--gait_speeds", type=float, nargs="*", default=(), metavar="V",
                         help="also the started gaits at sigma = 0 under these forward commands [m/s]")
     args = parser.parse_args(argv)
+    if args.confirm_seed is not None and args.confirm_seed == args.seed:
+        parser.error(f"--confirm_seed {args.confirm_seed} is the evaluation seed: give another, e.g. {args.seed + 1}")
 
     available = runs.list_checkpoints(args.run_dir)
     wanted = args.checkpoints if args.checkpoints else [it for it in available if it > 0 and it % args.every == 0]
@@ -46,22 +71,19 @@ def main(argv: list[str] | None = None) -> int:
               f"(it has {available})", file=sys.stderr)
         return 1
     policies = [load_policy_run(args.run_dir, it, name=f"it {it}") for it in wanted]
-    env_results = envelope.measure(policies, robots=args.robots, num_threads=args.num_threads, seed=args.seed,
-                                   **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
-    obeyed = obedience.measure(policies, robots=args.robots, settle_robots=args.robots, settle_duration_s=10.0,
-                               num_threads=args.num_threads, seed=args.seed)
-    for policy, ob in zip(policies, obeyed):
-        rows = [r for r in env_results if r.policy == policy.name]
-        missed = [f"{r.name} ({max(r.error):.2f}{', falls' if r.falls else ''})" for r in rows if not r.met]
-        verdict = f"envelope {'yes' if not missed else 'no'}, obedience {'yes' if ob.obeys() else 'no'}"
-        print(f"{policy.name} | goals: {verdict} | envelope met {len(rows) - len(missed)}/{len(rows)}"
-              f"{' | missed: ' + '; '.join(missed) if missed else ''} | {ob.summary()}", flush=True)
-    print("\n".join(envelope.summary_lines(env_results)))
+    met = evaluate(policies, args.robots, args.seed, args.num_threads)
     for speed in args.gait_speeds:
         at_speed = obedience.measure(policies, robots=args.robots, settle_robots=0, num_threads=args.num_threads,
                                      command=speed, progress=False, seed=args.seed)
         for policy, ob in zip(policies, at_speed):
             print(f"{policy.name} | command {speed:g} m/s | {ob.summary()}")
+    if args.confirm_seed is not None:
+        candidates = [p for p in policies if met[p.name]]
+        confirmed = evaluate(candidates, args.robots, args.confirm_seed, args.num_threads) if candidates else {}
+        chosen = [p.name for p in candidates if confirmed[p.name]]
+        print(f"chosen: {chosen[-1] if chosen else 'none'} (both goals at evaluation seed {args.seed}: "
+              f"{', '.join(p.name for p in candidates) or 'none'}; again at seed {args.confirm_seed}: "
+              f"{', '.join(chosen) or 'none'})")
     return 0
 
 
