@@ -161,6 +161,17 @@ def _unknown_key(section: str, key: Any, valid: list[str]) -> ConfigError:
                        f"(valid keys {where}: {', '.join(valid) or 'none'})")
 
 
+# Field metadata for a dict whose keys the config's own validate() checks against another field (a reward stage's
+# weights against rewards.weights): overrides may add entries to it, not only change the ones it holds.
+OPEN_KEYS = "open_keys"
+
+
+def _has_open_keys(parent: Any, key: str) -> bool:
+    if not dataclasses.is_dataclass(parent):
+        return False
+    return any(f.name == key and f.metadata.get(OPEN_KEYS) for f in _init_fields(type(parent)))
+
+
 def _check_dict_key(d: dict, key: Any, path: str) -> None:
     """Typo protection for overrides into a dict field: only existing keys, unless the dict is empty."""
     if d and key not in d:
@@ -355,15 +366,17 @@ def _dict_value_type(tp: Any) -> Any:
     return args[1] if len(args) == 2 else Any
 
 
-def _child_type(obj: Any, obj_tp: Any, key: str, path: str, full_key: str) -> Any:
-    """Annotation of ``obj[key]`` / ``obj.key``, raising the did-you-mean error if it does not exist."""
+def _child_type(obj: Any, obj_tp: Any, key: str, path: str, full_key: str, open_keys: bool = False) -> Any:
+    """Annotation of ``obj[key]`` / ``obj.key``, raising the did-you-mean error if it does not exist (in a dict
+    with ``open_keys``, any key)."""
     if dataclasses.is_dataclass(obj):
         names = [f.name for f in _init_fields(type(obj))]
         if key not in names:
             raise _unknown_key(path, key, names)
         return _hints(type(obj))[key]
     if isinstance(obj, dict):
-        _check_dict_key(obj, key, path)
+        if not open_keys:
+            _check_dict_key(obj, key, path)
         return _dict_value_type(obj_tp)
     raise ConfigError(
         f"cannot set '{full_key}': '{path}' holds a {type(obj).__name__} value ({_short_repr(obj)}), not a section; "
@@ -375,9 +388,11 @@ def _assign(parent: Any, key: str, tp: Any, value: Any, path: str) -> None:
     """Set ``parent.key`` (or ``parent[key]``); a mapping value merges into a section / non-empty dict."""
     current = parent.get(key) if isinstance(parent, dict) else getattr(parent, key)
     if isinstance(value, Mapping) and (dataclasses.is_dataclass(current) or (isinstance(current, dict) and current)):
+        open_keys = _has_open_keys(parent, key)
         for sub_key, sub_value in value.items():
             sub_path = _join(path, sub_key)
-            _assign(current, sub_key, _child_type(current, tp, sub_key, path, sub_path), sub_value, sub_path)
+            sub_tp = _child_type(current, tp, sub_key, path, sub_path, open_keys)
+            _assign(current, sub_key, sub_tp, sub_value, sub_path)
         return
     new_value = _coerce(tp, value, path)
     if isinstance(parent, dict):
@@ -412,12 +427,13 @@ def apply_overrides(cfg: Any, overrides: list[str]) -> Any:
                 f"quote it or fix the syntax"
             ) from None
 
-        obj, obj_tp, path = new_cfg, type(new_cfg), ""
+        obj, obj_tp, path, open_keys = new_cfg, type(new_cfg), "", False
         for part in parts[:-1]:
-            obj_tp = _child_type(obj, obj_tp, part, path, key.strip())
+            obj_tp = _child_type(obj, obj_tp, part, path, key.strip(), open_keys)
+            open_keys = _has_open_keys(obj, part)
             obj = obj[part] if isinstance(obj, dict) else getattr(obj, part)
             path = _join(path, part)
-        leaf_tp = _child_type(obj, obj_tp, parts[-1], path, key.strip())
+        leaf_tp = _child_type(obj, obj_tp, parts[-1], path, key.strip(), open_keys)
         if _accepts_str(leaf_tp) and not isinstance(value, str) and not (value is None and _is_union(leaf_tp)):
             value = text
         _assign(obj, parts[-1], leaf_tp, value, _join(path, parts[-1]))

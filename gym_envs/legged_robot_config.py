@@ -10,7 +10,7 @@ import os
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from gym_envs.config import Check, ConfigError, OneOf, Ordered, Range, check_values
+from gym_envs.config import OPEN_KEYS, Check, ConfigError, OneOf, Ordered, Range, check_values
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -83,7 +83,8 @@ class RewardStageCfg:
     errors and stronger phase rewards once the policy walks (docs/recipe-study.md, E25-E27)."""
 
     start_step: int = 0  # 0: no second stage
-    weights: dict[str, float] = field(default_factory=dict)  # replace these entries of rewards.weights
+    # Replace these entries of rewards.weights; validate() checks the names, so overrides may add any of them.
+    weights: dict[str, float] = field(default_factory=dict, metadata={OPEN_KEYS: True})
     tracking_error: str = ""  # '' keeps rewards.tracking_error
 
 

@@ -438,3 +438,16 @@ def test_grf_is_normalised_by_the_models_weight():
         env.step(torch.zeros(2, 12))
     assert env.grf.sum(dim=1).tolist() == pytest.approx([1.0, 1.0], abs=0.05)
     assert env.grf_normaliser == pytest.approx(8.952 * 9.81, rel=1e-3)
+
+
+def test_a_reward_stage_takes_new_entries_by_override_and_refuses_names_that_are_no_reward():
+    # The envelope recipe's stage already replaces two weights; a third one (E52) is added on the command line.
+    staged = apply_overrides(MiniCheetahOscCfg(), ["rewards.second_stage.weights={swing_grf: 10.0, stance_grf: 10.0}"])
+    for extra in ("rewards.second_stage.weights.swing_contact=5.0", "rewards.second_stage.weights={swing_contact: 5.0}"):
+        cfg = apply_overrides(staged, [extra])
+        cfg.validate()
+        assert cfg.rewards.second_stage.weights == {"swing_grf": 10.0, "stance_grf": 10.0, "swing_contact": 5.0}
+    with pytest.raises(ConfigError, match="'rewards.second_stage.weights.swing_contct' names no entry of rewards.weights"):
+        apply_overrides(staged, ["rewards.second_stage.weights.swing_contct=5.0"]).validate()
+    with pytest.raises(ConfigError, match="did you mean 'rewards.weights.swing_contact'"):
+        apply_overrides(staged, ["rewards.weights.swing_contct=5.0"])  # rewards.weights itself stays closed
