@@ -119,8 +119,9 @@ def test_cpu_envelope_switches_stage_halfway_and_its_env_draws_the_stated_starts
     stage, halfway = env_cfg.rewards.second_stage, train.max_iterations // 2 * train.num_steps_per_env
     assert stage.start_step == env_cfg.osc.second_stage.start_step == halfway  # iteration 600 of 1200
     assert stage.tracking_error == "absolute" and env_cfg.rewards.tracking_error == "relative"
-    assert stage.weights == {"swing_grf": 10.0, "stance_grf": 10.0} != {
+    assert stage.weights == {"swing_grf": 10.0, "stance_grf": 10.0, "swing_contact": 5.0} != {
         k: env_cfg.rewards.weights[k] for k in stage.weights}
+    assert list(train.actor.hidden_dims) == list(train.critic.hidden_dims) == [256, 256, 128]  # E50, E52
     # The profile builds; its uncoupled starts are a quarter, uniform over the gaits, then three-eighths
     # with bound drawn three times as often as each other gait.
     env_cfg.env.num_envs, env_cfg.sim.num_threads = 2048, 1
