@@ -20,6 +20,16 @@ from dataclasses import dataclass
 # (E14 seeds 0 and 1, 1000 and 600 iterations).
 CPU_STEPS_PER_S = 22_000
 CPU_MIRRORED_STEPS_PER_S = 14_500
+CPU_RECIPE_HIDDEN_DIMS = (128, 128, 64)
+# With the paper's [256, 256, 128] networks and mirror augmentation (cpu_envelope from E52): 3.5 s per iteration of
+# 24,576 env steps at two threads on the same machine (E51), 7.0k env steps/s.
+PAPER_HIDDEN_DIMS = (256, 256, 128)
+CPU_MIRRORED_PAPER_NETWORK_STEPS_PER_S = 7_000
+CPU_RATES = {
+    (CPU_RECIPE_HIDDEN_DIMS, False): CPU_STEPS_PER_S,
+    (CPU_RECIPE_HIDDEN_DIMS, True): CPU_MIRRORED_STEPS_PER_S,
+    (PAPER_HIDDEN_DIMS, True): CPU_MIRRORED_PAPER_NETWORK_STEPS_PER_S,
+}
 # The paper's settings (4096 robots x 32 steps, [256, 256, 128]) with MuJoCo Warp on one NVIDIA H200, learning and
 # checkpoints included: 0.70 s per iteration over 817 iterations of two runs (docs/gpu.md). The only GPU measured.
 H200_WARP_STEPS_PER_S = 186_000
@@ -95,19 +105,21 @@ def choose_defaults(device: str | None, profile: str | None, sim: str | None, *,
 
 
 def expected_duration(device: str, sim: str, num_envs: int, steps_per_env: int, iterations: int,
-                      world_size: int = 1, mirrored: bool = False) -> str:
+                      world_size: int = 1, mirrored: bool = False,
+                      hidden_dims: tuple[int, ...] = CPU_RECIPE_HIDDEN_DIMS) -> str:
     """One line: the expected wall time of `iterations` PPO iterations, and what the estimate rests on.
 
     `world_size` processes (torchrun) each step `num_envs` robots; on the CPU they share the cores the rate was
     measured on, so the estimate counts the env steps of all of them. `mirrored`: mirror augmentation doubles
-    the update.
+    the update. `hidden_dims`: the actor's layers; on the CPU the networks' size sets much of the rate.
     """
     per_iteration = num_envs * steps_per_env * world_size
-    if device == "cpu" and sim == "mujoco":
-        rate = CPU_MIRRORED_STEPS_PER_S if mirrored else CPU_STEPS_PER_S
+    rate = CPU_RATES.get((tuple(hidden_dims), mirrored))
+    if device == "cpu" and sim == "mujoco" and rate:
         seconds = iterations * per_iteration / rate
-        reference = (f"the idle 2-core development machine's rate with the CPU recipes' 1024 robots x 24 steps"
-                     f"{' and mirror augmentation' if mirrored else ''}, {rate / 1000:g}k env steps/s")
+        reference = (f"the idle 2-core development machine's rate with the CPU recipes' 1024 robots x 24 steps, "
+                     f"{list(hidden_dims)} networks{' and mirror augmentation' if mirrored else ''}, "
+                     f"{rate / 1000:g}k env steps/s")
         return (f"expected duration: about {_human(seconds)} for {iterations} iterations x {per_iteration:,} "
                 f"env steps, at {reference} (more cores are faster); the progress lines give this machine's ETA")
     if device == "cuda" and sim == "warp" and world_size == 1:
@@ -115,7 +127,8 @@ def expected_duration(device: str, sim: str, num_envs: int, steps_per_env: int, 
         return (f"expected duration: about {_human(seconds)} for {iterations} iterations x {per_iteration:,} env steps "
                 f"at the rate measured on one NVIDIA H200 with the paper's settings, {H200_WARP_STEPS_PER_S / 1000:g}k "
                 f"env steps/s (other GPUs differ); the progress lines give this machine's ETA")
-    return (f"expected duration: no measured rate for {device} with {sim} physics ({iterations} iterations x "
+    networks = f" and {list(hidden_dims)} networks" if device == "cpu" and sim == "mujoco" else ""
+    return (f"expected duration: no measured rate for {device} with {sim} physics{networks} ({iterations} iterations x "
             f"{per_iteration:,} env steps); the progress lines give the ETA from the first iteration")
 
 
