@@ -143,7 +143,7 @@ def _main(args: argparse.Namespace) -> int:
                                         train_cfg.num_steps_per_env,
                                         train_cfg.max_iterations - runner.current_learning_iteration, plan.world,
                                         mirrored=train_cfg.algorithm.symmetry_cfg.use_data_augmentation,
-                                        hidden_dims=tuple(train_cfg.actor.hidden_dims)))
+                                        hidden_dims=train_cfg.actor.hidden_dims))
                 print(f"task {plan.task} | {env_cfg.env.num_envs} envs on {env_cfg.env.device} | {runner.describe()}")
                 for start_step, changes in env_cfg.second_stages():
                     print(f"second stage from iteration {-(-start_step // train_cfg.num_steps_per_env)}: {changes}")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import datetime
 import importlib.util
 from dataclasses import dataclass
+from typing import Sequence
 
 # Env steps per second of the CPU recipes' training (1024 robots x 24 steps, [128, 128, 64]), learning and
 # checkpoints included, on the idle 2-core development machine (docs/recipe-study.md): 20.9k-23.4k in the
@@ -106,7 +107,7 @@ def choose_defaults(device: str | None, profile: str | None, sim: str | None, *,
 
 def expected_duration(device: str, sim: str, num_envs: int, steps_per_env: int, iterations: int,
                       world_size: int = 1, mirrored: bool = False,
-                      hidden_dims: tuple[int, ...] = CPU_RECIPE_HIDDEN_DIMS) -> str:
+                      hidden_dims: Sequence[int] = CPU_RECIPE_HIDDEN_DIMS) -> str:
     """One line: the expected wall time of `iterations` PPO iterations, and what the estimate rests on.
 
     `world_size` processes (torchrun) each step `num_envs` robots; on the CPU they share the cores the rate was
