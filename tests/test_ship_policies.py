@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import csv
 import os
+import shutil
 import sys
 
 import pytest
 
 import sweep
+import train
 from learning import runs
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
@@ -49,3 +51,28 @@ def test_seeds_ship_one_at_a_time_into_their_own_folders(sweep_runs, tmp_path, m
     assert ship_policies.main(["--remeasure", "--out", str(tmp_path)]) == 0
     assert measured[-2:] == [runs.shipped_policy_dir("111", s, str(tmp_path)) for s in (3, 4)]
     assert [row[:3] for row in manifest(tmp_path)] == [("111", "3", "1"), ("111", "4", "1")]
+
+
+def only_run(root):
+    (run,) = [os.path.join(d, n) for d, names, _ in os.walk(root) for n in names if runs.is_run_dir(os.path.join(d, n))]
+    return run
+
+
+def test_wall_time_of_a_resumed_run_counts_the_training_before_its_checkpoint(tmp_path):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    tiny = ["--num_threads", "1", "--headless"]
+    assert train.main(["--task", "mini_cheetah_osc", "--log_root", str(tmp_path / "first"), "--max_iterations", "2",
+                       "--num_envs", "16", "--set", "train.num_steps_per_env=4", *tiny]) == 0
+    first = only_run(tmp_path / "first")
+    assert train.main(["--resume", "--load_run", first, "--log_root", str(tmp_path / "resumed"), "--max_iterations",
+                       "1", *tiny]) == 0
+    resumed = only_run(tmp_path / "resumed")
+    events = EventAccumulator(resumed)
+    events.Reload()
+    own = sum(e.value for tag in ("Perf/collection_time", "Perf/learning_time") for e in events.Scalars(tag))
+    before = ship_policies.training_seconds(first)
+    assert 0 < ship_policies.training_seconds(first, until=1) < before  # only iteration 0's events
+    assert ship_policies.training_seconds(resumed) == pytest.approx(own + before)
+    shutil.rmtree(first)  # the run it was resumed from is gone: its time is unknown, not zero
+    assert ship_policies.training_seconds(resumed) is None

@@ -14,9 +14,12 @@ Each shipped policy is then measured at 1 m/s in the evaluation setting:
     oscillator phases, with their agreement;
   - obedience: sigma = 0, oscillators started in trot / pace / bound / pronk, 16 robots each, share
     walking that gait at 10 s; sigma = 1 from random phases, 16 robots, share in a regular gait at
-    10 s, and each leg's share of the GRF there (RF/LF/RH/LH) (analysis.obedience).
-resources/policies/manifest.csv records configuration, command, commit, seed, iterations, wall time,
-the machine that trained it and the measured metrics.
+    10 s, and each leg's share of the GRF there (RF/LF/RH/LH) (analysis.obedience);
+  - the command envelope: every command of analysis.envelope.ENVELOPE, 16 robots from random phases at the
+    trained coupling, 8 s after a 2 s start: commands met, the largest per-axis error, falls.
+resources/policies/manifest.csv records configuration, command, commit, seed, iterations, wall time (a
+sweep's own record, else the training time the run's TensorBoard events add up to, through the run it was
+resumed from), the machine that trained it and the measured metrics.
 """
 
 from __future__ import annotations
@@ -29,8 +32,9 @@ import subprocess
 import sys
 
 import yaml
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from analysis import obedience
+from analysis import envelope, obedience
 from analysis.gait import mix_text
 from analysis.locomotion import check_locomotion
 from analysis.plotting import write_csv
@@ -41,7 +45,7 @@ from learning import runs
 PROVENANCE = ("orc", "command_mps", "commit", "seed", "iterations", "wall_time_s", "machine", "profile")
 METRICS = ("tracking_error_mps", "mean_velocity_mps", "falls", "robots", "gaits_contacts", "gaits_oscillators",
            "gait_label_agreement", "robots_alike", *(f"obeys_{g}" for g in obedience.STARTED_GAITS),
-           "sigma1_regular_at_10s", "sigma1_grf_shares")
+           "sigma1_regular_at_10s", "sigma1_grf_shares", "envelope_met", "envelope_max_error", "envelope_falls")
 FIELDS = PROVENANCE + METRICS
 ROBOTS = 16
 
@@ -53,7 +57,10 @@ def measure(policy_dir: str, num_threads: int) -> dict:
                              num_threads=num_threads)
     (obeyed,) = obedience.measure([run], robots=ROBOTS, settle_robots=ROBOTS, settle_duration_s=10.0,
                                   num_threads=num_threads, progress=False)
-    print(f"ORC {run.orc} ({policy_dir}): {check.summary()}\n    {obeyed.summary()}", flush=True)
+    commands = envelope.measure([run], robots=ROBOTS, num_threads=num_threads, progress=False,
+                                **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
+    print(f"ORC {run.orc} ({policy_dir}): {check.summary()}\n    {obeyed.summary()}\n    "
+          + "\n    ".join(envelope.summary_lines(commands)), flush=True)
     return {
         "tracking_error_mps": round(check.tracking_error, 3), "mean_velocity_mps": round(check.mean_velocity, 3),
         "falls": check.falls, "robots": check.num_envs,
@@ -64,7 +71,30 @@ def measure(policy_dir: str, num_threads: int) -> dict:
         **{f"obeys_{g}": round(s.obeyed, 3) for g, s in obeyed.started.items()},
         "sigma1_regular_at_10s": round(obeyed.settling.regular_at_10s, 3),
         "sigma1_grf_shares": "/".join(f"{x:.2f}" for x in obeyed.settling.leg_shares),
+        "envelope_met": f"{sum(c.met for c in commands)}/{len(commands)}",
+        "envelope_max_error": round(max(max(c.error) for c in commands), 3),
+        "envelope_falls": sum(c.falls for c in commands),
     }
+
+
+def training_seconds(run_dir: str, until: int | None = None) -> float | None:
+    """Seconds a train.py run spent training (env stepping and PPO updates, as its TensorBoard events record
+    them) in its iterations before `until`, plus those of the run it was resumed from, up to that checkpoint;
+    None where a run of the chain has no such record."""
+    accumulator = EventAccumulator(run_dir, size_guidance={"scalars": 0})
+    accumulator.Reload()
+    tags = ("Perf/collection_time", "Perf/learning_time")
+    if not set(tags) <= set(accumulator.Tags()["scalars"]):
+        return None
+    seconds = sum(e.value for tag in tags for e in accumulator.Scalars(tag) if until is None or e.step < until)
+    resumed_from = runs.load_run_configs(run_dir)[2].resumed_from
+    if not resumed_from:
+        return seconds
+    earlier = os.path.dirname(resumed_from)
+    if not runs.is_run_dir(earlier):
+        return None
+    before = training_seconds(earlier, until=runs.checkpoint_iteration(resumed_from))
+    return None if before is None else seconds + before
 
 
 def ship(args) -> list[dict]:
@@ -99,10 +129,14 @@ def ship_run(run_dir: str, orc: str, args, head: str) -> dict:
     if os.path.isfile(status_path):
         with open(status_path) as f:
             status = yaml.safe_load(f) or {}
+    wall_time = status.get("wall_time_s")
+    if wall_time is None:
+        seconds = training_seconds(run_dir)
+        wall_time = "" if seconds is None else round(seconds, 1)
     return {
         "orc": orc, "command_mps": 1.0, "commit": args.commit or runs.trained_commit(run_dir) or head,
         "seed": seed, "iterations": iteration,
-        "wall_time_s": status.get("wall_time_s", ""), "machine": args.machine, "profile": loaded.train_cfg.profile,
+        "wall_time_s": wall_time, "machine": args.machine, "profile": loaded.train_cfg.profile,
         **measure(target, args.num_threads),
     }
 
@@ -147,7 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.runs and not args.machine:
         parser.error("--runs needs --machine (what trained the runs)")
     rows = remeasure(args) if args.remeasure else merged(read_manifest(args.out), ship(args))
-    write_csv(os.path.join(args.out, "manifest.csv"), FIELDS, ([row[k] for k in FIELDS] for row in rows))
+    # Rows shipped before a column existed leave it empty until --remeasure.
+    write_csv(os.path.join(args.out, "manifest.csv"), FIELDS, ([row.get(k, "") for k in FIELDS] for row in rows))
     return 0
 
 
