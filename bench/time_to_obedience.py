@@ -16,6 +16,8 @@ pushes or randomisation), at a 1 m/s command:
 A pronk reached from random phases counts for walking, never for obedience. The clock counts
 training only (env stepping and PPO updates), not the evaluations. The run stops once it both walks
 and obeys (and, with --envelope, meets the envelope at one evaluation), or after --max_minutes.
+For a run already trained, `python tools/evaluate_checkpoints.py <run>` names the first saved checkpoint
+meeting envelope and obedience with the training minutes its TensorBoard events record.
 
     python bench/time_to_obedience.py              # prints 'minutes to walking' and 'minutes to obedience'
     python bench/time_to_obedience.py --max_minutes 30 --log_root logs/bench   # keep the run folder

@@ -490,6 +490,28 @@ def export_dir(run_dir: str, log_root: str) -> str:
     return os.path.join(run_dir, EXPORT_DIR)
 
 
+def training_seconds(run_dir: str, until: int | None = None) -> float | None:
+    """Seconds a train.py run spent training (env stepping and PPO updates, as its TensorBoard events record
+    them) in its iterations before `until`, plus those of the run it was resumed from, up to that checkpoint;
+    None where a run of the chain has no such record."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # slow to import: here only
+
+    accumulator = EventAccumulator(run_dir, size_guidance={"scalars": 0})
+    accumulator.Reload()
+    tags = ("Perf/collection_time", "Perf/learning_time")
+    if not set(tags) <= set(accumulator.Tags()["scalars"]):
+        return None
+    seconds = sum(e.value for tag in tags for e in accumulator.Scalars(tag) if until is None or e.step < until)
+    resumed_from = load_run_configs(run_dir)[2].resumed_from
+    if not resumed_from:
+        return seconds
+    earlier = os.path.dirname(resumed_from)
+    if not is_run_dir(earlier):
+        return None
+    before = training_seconds(earlier, until=checkpoint_iteration(resumed_from))
+    return None if before is None else seconds + before
+
+
 def trained_commit(run_dir: str) -> str | None:
     """The short commit a run was trained at, from the code state rsl-rl's logger stores in <run>/git/;
     '+diff' marks a run trained with uncommitted changes. None when the run has no such record."""

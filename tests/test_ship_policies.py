@@ -71,8 +71,8 @@ def test_wall_time_of_a_resumed_run_counts_the_training_before_its_checkpoint(tm
     events = EventAccumulator(resumed)
     events.Reload()
     own = sum(e.value for tag in ("Perf/collection_time", "Perf/learning_time") for e in events.Scalars(tag))
-    before = ship_policies.training_seconds(first)
-    assert 0 < ship_policies.training_seconds(first, until=1) < before  # only iteration 0's events
-    assert ship_policies.training_seconds(resumed) == pytest.approx(own + before)
+    before = runs.training_seconds(first)
+    assert 0 < runs.training_seconds(first, until=1) < before  # only iteration 0's events
+    assert runs.training_seconds(resumed) == pytest.approx(own + before)
     shutil.rmtree(first)  # the run it was resumed from is gone: its time is unknown, not zero
-    assert ship_policies.training_seconds(resumed) is None
+    assert runs.training_seconds(resumed) is None

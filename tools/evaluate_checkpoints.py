@@ -9,7 +9,10 @@ For each checkpoint (all checkpoints batched together, 16 robots per measurement
   - obedience (analysis.obedience): sigma = 0, oscillators started in trot / pace / bound / pronk at
     1 m/s, share walking that gait at 10 s; sigma = 1 from random phases, share regular at 10 s;
   - the verdict on both goals: every envelope command met, and Obedience.obeys (each started gait
-    walked at half the command's speed or more by 80 % of the robots, 80 % regular at 10 s, no falls).
+    walked at half the command's speed or more by 80 % of the robots, 80 % regular at 10 s, no falls);
+    then the first measured checkpoint meeting both, with the training minutes the run spent to reach it
+    (issue 26's time to envelope and obedience, for a finished run; bench/time_to_obedience.py --envelope
+    measures it while training).
 One summary line per checkpoint on stdout, then every envelope line. --gait_speeds adds, per checkpoint
 and speed, the started gaits at sigma = 0 under that forward command (walking: at half of it or more).
 --confirm_seed chooses a checkpoint: those meeting both goals are measured again on a second evaluation
@@ -45,6 +48,18 @@ def evaluate(policies, robots: int, seed: int, num_threads: int) -> dict[str, bo
     return met
 
 
+def first_met_line(run_dir: str, met_iterations: list[int]) -> str:
+    """The time to the first measured checkpoint that meets both goals, by the run's own training clock."""
+    if not met_iterations:
+        return "first checkpoint meeting both goals: none of those measured"
+    first = met_iterations[0]
+    seconds = runs.training_seconds(run_dir, until=first)
+    clock = "no training time recorded" if seconds is None else (
+        f"{seconds / 60:.1f} min of training by the run's own clock (its TensorBoard events: env stepping and PPO "
+        "updates, on the machine and under the load it trained with)")
+    return f"first checkpoint meeting both goals: it {first}, {clock}"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_dir")
@@ -72,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     policies = [load_policy_run(args.run_dir, it, name=f"it {it}") for it in wanted]
     met = evaluate(policies, args.robots, args.seed, args.num_threads)
+    print(first_met_line(args.run_dir, [it for it in wanted if met[f"it {it}"]]))
     for speed in args.gait_speeds:
         at_speed = obedience.measure(policies, robots=args.robots, settle_robots=0, num_threads=args.num_threads,
                                      command=speed, progress=False, seed=args.seed)

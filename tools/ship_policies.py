@@ -32,7 +32,6 @@ import subprocess
 import sys
 
 import yaml
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from analysis import envelope, obedience
 from analysis.gait import mix_text
@@ -77,26 +76,6 @@ def measure(policy_dir: str, num_threads: int) -> dict:
     }
 
 
-def training_seconds(run_dir: str, until: int | None = None) -> float | None:
-    """Seconds a train.py run spent training (env stepping and PPO updates, as its TensorBoard events record
-    them) in its iterations before `until`, plus those of the run it was resumed from, up to that checkpoint;
-    None where a run of the chain has no such record."""
-    accumulator = EventAccumulator(run_dir, size_guidance={"scalars": 0})
-    accumulator.Reload()
-    tags = ("Perf/collection_time", "Perf/learning_time")
-    if not set(tags) <= set(accumulator.Tags()["scalars"]):
-        return None
-    seconds = sum(e.value for tag in tags for e in accumulator.Scalars(tag) if until is None or e.step < until)
-    resumed_from = runs.load_run_configs(run_dir)[2].resumed_from
-    if not resumed_from:
-        return seconds
-    earlier = os.path.dirname(resumed_from)
-    if not runs.is_run_dir(earlier):
-        return None
-    before = training_seconds(earlier, until=runs.checkpoint_iteration(resumed_from))
-    return None if before is None else seconds + before
-
-
 def ship(args) -> list[dict]:
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     rows = []
@@ -131,7 +110,7 @@ def ship_run(run_dir: str, orc: str, args, head: str) -> dict:
             status = yaml.safe_load(f) or {}
     wall_time = status.get("wall_time_s")
     if wall_time is None:
-        seconds = training_seconds(run_dir)
+        seconds = runs.training_seconds(run_dir)
         wall_time = "" if seconds is None else round(seconds, 1)
     return {
         "orc": orc, "command_mps": 1.0, "commit": args.commit or runs.trained_commit(run_dir) or head,
