@@ -1,6 +1,6 @@
 """Train every ORC configuration of the paper for several seeds: the ablation's training campaign.
 
-    python sweep.py --seeds 0 1 2 --profile cpu_oscillators --out logs/sweep
+    python sweep.py --seeds 0 1 2 --out logs/sweep   # the CPU recipe cpu_envelope (--profile to choose)
     python sweep.py --orcs 111 110 --seeds 0 --set train.algorithm.learning_rate=1e-4
 
 Each run has a fixed folder <out>/ORC_<xyz>/seed<k>/ (env.yaml, train.yaml, model_<it>.pt,
@@ -49,7 +49,7 @@ def build_parser() -> cli.Parser:
     parser.add_argument("--max_iterations", type=cli.integer(1), default=None,
                         help="total PPO iterations per run (default: the train config's)")
     parser.add_argument("--num_envs", type=cli.integer(1), default=None)
-    parser.add_argument("--profile", default=None, help="as in train.py (default: cpu_oscillators on cpu, paper on cuda)")
+    parser.add_argument("--profile", default=None, help="as in train.py (default: cpu_envelope on cpu, paper on cuda)")
     cli.add_compute(parser)
     cli.add_overrides(parser, "config override for every run, as in train.py")
     return parser

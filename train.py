@@ -43,7 +43,7 @@ built or written; a bad one is one line on stderr naming it and what is allowed 
 
 Defaults that fit the machine (learning/machine.py). Without --device the run uses CUDA when torch
 sees a device, else the CPU; without --profile it trains the paper's settings on CUDA and a CPU recipe
-on the CPU ({cpu_recipes}; under cpu_oscillators ORC-111 follows its oscillators); without --sim it simulates with
+on the CPU ({cpu_recipes}; under cpu_envelope ORC-111 follows its oscillators and its commands); without --sim it simulates with
 MuJoCo Warp on CUDA when the gpu extra is installed. The first lines of a run say what was chosen,
 why, the expected duration (for the CPU, from the rate measured on a 2-core machine) and the flag
 that picks the other settings. A resumed run keeps its own profile and physics.
@@ -98,8 +98,8 @@ def build_parser() -> cli.Parser:
     p.add_argument("--run_name", type=cli.name, help="suffix of the run folder name (default seed<seed>)")
     cli.add_compute(p)
     p.add_argument("--profile", help="named override set from learning.runner_config.PROFILES: paper, cpu_fast, "
-                   "cpu_oscillators (default: paper on cuda; on cpu cpu_oscillators for mini_cheetah_osc, else "
-                   "cpu_fast; a resumed run keeps its own)")
+                   "cpu_oscillators, cpu_envelope (default: paper on cuda; on cpu cpu_envelope for mini_cheetah_osc, "
+                   "else cpu_fast; a resumed run keeps its own)")
     cli.add_overrides(p, "config override, repeatable: train.<key> for the train config, other keys for the env "
                          "config")
     p.add_argument("--logger", choices=("tensorboard", "wandb", "neptune"),

@@ -1,6 +1,8 @@
 """Wall-clock minutes until mini_cheetah_osc ORC-111 walks, and until it obeys its oscillators.
 
-Trains ORC-111 with `--profile` (default cpu_oscillators, the CPU recipe of the task) and, every `--eval_every` iterations, pauses the
+Trains ORC-111 with `--profile` (default cpu_oscillators, the forward-only recipe, whose 600 iterations
+fit the default 10-iteration evaluation steps; the task's CPU recipe cpu_envelope wants
+`--profile cpu_envelope --envelope --eval_every 100 --max_minutes 90`) and, every `--eval_every` iterations, pauses the
 clock and evaluates the current deterministic policy in the analysis evaluation setting (no noise,
 pushes or randomisation), at a 1 m/s command:
   - walking (analysis.locomotion, 16 robots, random phases, 12 s of which the last 10 s count):
@@ -21,7 +23,7 @@ meeting envelope and obedience with the training minutes its TensorBoard events 
 
     python bench/time_to_obedience.py              # prints 'minutes to walking' and 'minutes to obedience'
     python bench/time_to_obedience.py --max_minutes 30 --log_root logs/bench   # keep the run folder
-    python bench/time_to_obedience.py --envelope --eval_every 100 --max_minutes 60 --set ...   # issue 26's goal
+    python bench/time_to_obedience.py --profile cpu_envelope --envelope --eval_every 100 --max_minutes 90   # issue 26's goal
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """Training defaults that fit the machine, and what a run should expect to take.
 
 Without --device, --profile and --sim a run picks: CUDA when torch sees a device, else the CPU; the
-paper's settings on CUDA and a CPU recipe on the CPU (`cpu_oscillators` for the oscillator task, under
-which ORC-111 follows its oscillators; `cpu_fast` for the others); MuJoCo Warp physics on CUDA when
+paper's settings on CUDA and a CPU recipe on the CPU (`cpu_envelope` for the oscillator task, under
+which ORC-111 follows its oscillators over the paper's command envelope; `cpu_fast` for the others); MuJoCo Warp physics on CUDA when
 the `gpu` extra is installed, else MuJoCo's CPU batch. A resumed run keeps its own profile and
 physics. `choose_defaults` is pure (the caller says whether CUDA and Warp are there), so it is
 tested without either.
@@ -46,7 +46,7 @@ def cpu_profile(task: str | None) -> str:
 
 def cpu_recipes_text() -> str:
     """The CPU recipes as the help texts quote them, read from the profiles, e.g. '1024 robots x 24 steps:
-    cpu_oscillators, 600 iterations, for mini_cheetah_osc; cpu_fast, 300 iterations, for other tasks'."""
+    cpu_envelope, 1200 iterations, for mini_cheetah_osc; cpu_fast, 300 iterations, for other tasks'."""
     from gym_envs.registry import TASKS
     from learning.runner_config import profile_setting
 

@@ -23,11 +23,11 @@ def test_a_cpu_only_machine_gets_the_cpu_recipe_and_is_told_how_to_get_the_paper
 
 def test_the_oscillator_task_gets_the_recipe_under_which_policies_follow_their_oscillators():
     d = choose_defaults(None, None, None, cuda_available=False, warp_available=False, task="mini_cheetah_osc")
-    assert d.profile == "cpu_oscillators" and "cpu_oscillators is the CPU recipe of mini_cheetah_osc" in d.describe("mujoco")
+    assert d.profile == "cpu_envelope" and "cpu_envelope is the CPU recipe of mini_cheetah_osc" in d.describe("mujoco")
     assert choose_defaults(None, None, None, cuda_available=False, warp_available=False,
                            task="mini_cheetah").profile == "cpu_fast"
     d = choose_defaults(None, None, None, cuda_available=True, warp_available=True, task="mini_cheetah_osc")
-    assert d.profile == "paper" and "(profile cpu_oscillators)" in d.describe("warp")
+    assert d.profile == "paper" and "(profile cpu_envelope)" in d.describe("warp")
 
 
 @pytest.mark.parametrize("warp, sim", [(True, "warp"), (False, "mujoco")])
@@ -88,21 +88,21 @@ def test_a_run_says_what_it_chose_why_and_how_long_it_takes(tmp_path, capsys, mo
                        "--num_threads", "1", "--max_iterations", "1", "--set", "train.num_steps_per_env=4"])
     assert code == 0
     first = capsys.readouterr().out.splitlines()[:2]
-    assert first[0].startswith("settings: device cpu, profile cpu_oscillators, physics mujoco (torch sees no CUDA device; "
-                               "cpu_oscillators is")
+    assert first[0].startswith("settings: device cpu, profile cpu_envelope, physics mujoco (torch sees no CUDA device; "
+                               "cpu_envelope is")
     assert first[1].startswith("expected duration: about 1 s for 1 iterations x 64 env steps")
     (experiment,) = os.listdir(tmp_path)
     (run,) = os.listdir(tmp_path / experiment)
     saved = (tmp_path / experiment / run / "train.yaml").read_text()
-    assert "profile: cpu_oscillators" in saved and "[128, 128, 64]" in saved  # the recipe's networks, the flags on top
+    assert "profile: cpu_envelope" in saved and "[256, 256, 128]" in saved  # the recipe's networks, the flags on top
 
 
 def test_train_help_quotes_the_cpu_recipes_from_their_profiles(monkeypatch, capsys):
     import train
     from learning import runner_config
 
-    iterations = runner_config.profile_setting("cpu_oscillators", "train.max_iterations")
-    assert f"cpu_oscillators, {iterations} iterations, for mini_cheetah_osc" in train.build_parser().description
-    changed = runner_config.Profile("x", runner_config.PROFILES["cpu_oscillators"].overrides + ("train.max_iterations=7",))
-    monkeypatch.setitem(runner_config.PROFILES, "cpu_oscillators", changed)
-    assert "cpu_oscillators, 7 iterations" in train.build_parser().description
+    iterations = runner_config.profile_setting("cpu_envelope", "train.max_iterations")
+    assert f"cpu_envelope, {iterations} iterations, for mini_cheetah_osc" in train.build_parser().description
+    changed = runner_config.Profile("x", runner_config.PROFILES["cpu_envelope"].overrides + ("train.max_iterations=7",))
+    monkeypatch.setitem(runner_config.PROFILES, "cpu_envelope", changed)
+    assert "cpu_envelope, 7 iterations" in train.build_parser().description
