@@ -98,7 +98,9 @@ def test_a_resumed_run_continues_its_reward_schedule_where_the_checkpoint_left_i
         task = runner.env.task
         assert (task.common_step_counter, task.reward_stage) == (16, stage)
         assert task.reward_weights["swing_grf"] == (9.0 if stage == 2 else 5.0)
-    assert run_train(tmp_path / "new", "--max_iterations", "1", "--set", "rewards.second_stage.start_step=20") == 0
+    # cpu_oscillators stages no weights of its own (cpu_envelope, the CPU default, does)
+    assert run_train(tmp_path / "new", "--max_iterations", "1", "--profile", "cpu_oscillators", "--set",
+                     "rewards.second_stage.start_step=20") == 0
     assert "second stage from iteration 3: rewards: no change" in capsys.readouterr().out
 
 
