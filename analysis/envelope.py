@@ -43,6 +43,7 @@ TOLERANCE = 0.25  # [m/s or rad/s] per axis, mean absolute error over robots
 NO_STEPS = "no steps"
 PROTOCOL = {"robots": 16, "warmup_s": 2.0, "measure_s": 8.0}
 QUICK = {"robots": 4, "warmup_s": 2.0, "measure_s": 5.0}
+PROTOCOL_WINDOW = {k: PROTOCOL[k] for k in ("warmup_s", "measure_s")}  # the protocol's timing, any robot count
 FILE_STEM = "envelope"
 AXES = ("v_x", "v_y", "yaw_rate")
 

@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.envelope:
             commands = envelope.measure([PolicyRun(f"it {it}", env_cfg, actor)], robots=args.eval_envs,
                                         num_threads=args.num_threads, progress=False,
-                                        **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
+                                        **envelope.PROTOCOL_WINDOW)
             missed = [c.name for c in commands if not c.met]
             print(f"{head} | envelope met {len(commands) - len(missed)}/{len(commands)}"
                   + (f", missed: {', '.join(missed)}" if missed else ""), flush=True)

@@ -33,7 +33,7 @@ from learning import runs
 def evaluate(policies, robots: int, seed: int, num_threads: int) -> dict[str, bool]:
     """Measure the checkpoints, print a summary line each and the envelope's lines; {name: both goals met}."""
     env_results = envelope.measure(policies, robots=robots, num_threads=num_threads, seed=seed,
-                                   **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
+                                   **envelope.PROTOCOL_WINDOW)
     obeyed = obedience.measure(policies, robots=robots, settle_robots=robots, settle_duration_s=10.0,
                                num_threads=num_threads, seed=seed)
     met = {}

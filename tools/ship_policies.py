@@ -57,7 +57,7 @@ def measure(policy_dir: str, num_threads: int) -> dict:
     (obeyed,) = obedience.measure([run], robots=ROBOTS, settle_robots=ROBOTS, settle_duration_s=10.0,
                                   num_threads=num_threads, progress=False)
     commands = envelope.measure([run], robots=ROBOTS, num_threads=num_threads, progress=False,
-                                **{k: envelope.PROTOCOL[k] for k in ("warmup_s", "measure_s")})
+                                **envelope.PROTOCOL_WINDOW)
     print(f"ORC {run.orc} ({policy_dir}): {check.summary()}\n    {obeyed.summary()}\n    "
           + "\n    ".join(envelope.summary_lines(commands)), flush=True)
     return {
