@@ -4,8 +4,10 @@ For every command (v_x, v_y, yaw rate) of ENVELOPE the robots start from the def
 oscillator phases at the coupling they were trained with (the evaluation setting of analysis.rollout),
 get the command from the first step, and are measured after a start of `warmup_s`: per robot the mean
 body-frame v_x, v_y and yaw rate over `measure_s`, the mean absolute error per axis against the
-command, the robots that fell, the contact-based gait at the end of the window ("no steps" where
-a leg did not touch down twice, as a standing robot does), and the step frequency: touchdowns per
+command, the robots that fell, the contact-based gait at the end of the window ("no steps" where no
+foot touched down in the window, as a standing robot does; "irregular" where feet step but some leg did not
+land in each of the last two RF cycles: a leg held on the ground or in the air, or legs stepping at different
+rates), and the step frequency: touchdowns per
 second of each foot, averaged over feet and robots (the paper: about 4 Hz at 3 m/s). A command is met when every axis is within
 TOLERANCE and no robot fell.
 
@@ -41,6 +43,7 @@ ENVELOPE: dict[str, tuple[float, float, float]] = {
 }
 TOLERANCE = 0.25  # [m/s or rad/s] per axis, mean absolute error over robots
 NO_STEPS = "no steps"
+IRREGULAR = "irregular"  # feet step, but no two-cycle window in which every leg lands (gait.rpd_timeseries)
 PROTOCOL = {"robots": 16, "warmup_s": 2.0, "measure_s": 8.0}
 QUICK = {"robots": 4, "warmup_s": 2.0, "measure_s": 5.0}
 PROTOCOL_WINDOW = {k: PROTOCOL[k] for k in ("warmup_s", "measure_s")}  # the protocol's timing, any robot count
@@ -58,7 +61,7 @@ class CommandResult:
     tracked: tuple[float, float, float]  # mean over robots and the window
     error: tuple[float, float, float]  # mean over robots of |robot's mean - command|
     falls: int
-    gaits: dict[str, float]  # share of robots per contact gait at the end (or NO_STEPS)
+    gaits: dict[str, float]  # share of robots per contact gait at the end (or NO_STEPS, IRREGULAR)
     alike: bool  # the robots are one sample repeated (Rollout.robots_alike)
     step_frequency: float  # [Hz] touchdowns per second per foot, mean over feet and robots
 
@@ -71,10 +74,10 @@ def command_result(rollout, name: str, command) -> CommandResult:
     lin, ang = rollout.data["base_lin_vel"], rollout.data["base_ang_vel"]
     per_robot = np.stack([lin[..., 0].mean(axis=1), lin[..., 1].mean(axis=1), ang[..., 2].mean(axis=1)], axis=1)
     contact = gait.rpd_timeseries(rollout.data["grf"], dt=rollout.dt)
-    labels = np.where(contact.valid[:, -1], contact.labels[:, -1], NO_STEPS)
+    steps = np.array([sum(len(td) for td in gait.touchdowns(g, dt=rollout.dt)) / 4 for g in rollout.data["grf"]])
+    labels = np.where(contact.valid[:, -1], contact.labels[:, -1], np.where(steps > 0, IRREGULAR, NO_STEPS))
     names, counts = np.unique(labels, return_counts=True)
     seconds = rollout.data["grf"].shape[1] * rollout.dt
-    steps = [sum(len(td) for td in gait.touchdowns(g, dt=rollout.dt)) / 4 for g in rollout.data["grf"]]
     return CommandResult(
         policy=rollout.info.get("run", ""),
         orc=rollout.info.get("orc", ""),

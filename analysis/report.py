@@ -339,7 +339,8 @@ def _section_envelope(ev: dict) -> list[str]:
           f"Per policy and command (v_x, v_y, yaw rate): {s['robots']} robots from random phases at the trained "
           f"coupling, {s['measure_s']:g} s after a {s['warmup_s']:g} s start; the tracked mean of each axis, whether "
           f"every axis is within {envelope.TOLERANCE:g} (m/s or rad/s) with no falls, and the contact gait at the end "
-          f"(\"{envelope.NO_STEPS}\": a leg did not land twice, e.g. standing), and each foot's touchdowns per second "
+          f"(\"{envelope.NO_STEPS}\": no foot landed, as in standing; \"{envelope.IRREGULAR}\": feet step but some leg "
+          "did not land in each of the last two cycles), and each foot's touchdowns per second "
           "(paper: about 4 Hz at 3 m/s). CSV: `envelope.csv`.", ""]
     rows = [[r.orc, r.policy, r.name, " / ".join(f"{x:+.2f}" for x in r.tracked), f"{max(r.error):.2f}",
              "yes" if r.met else "no", r.falls, gait.mix_text(r.gaits, r.alike), f"{r.step_frequency:.1f}"]

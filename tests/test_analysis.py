@@ -372,7 +372,13 @@ def test_envelope_scores_tracking_per_axis_falls_and_standing():
     assert r.tracked == pytest.approx((0.8, 0.0, 0.9)) and r.error == pytest.approx((0.2, 0.0, 0.1))
     assert r.met and r.gaits == {envelope.NO_STEPS: 1.0} and r.step_frequency == 0.0  # no footfalls: it stood
     data["grf"][:, 50::100, :] = 0.5  # one touchdown per second per foot (10 ms loads, 0.99 s unloaded)
-    assert envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).step_frequency == 1.0
+    stepping = envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0))
+    assert stepping.step_frequency == 1.0 and stepping.gaits == {"pronk": 1.0}  # all four feet land together
+    data["grf"][:, :, 1] = 1.0  # LF holds the ground: the others step, the window has no LF touchdown
+    assert envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).gaits == {
+        envelope.IRREGULAR: 1.0}
+    data["grf"][:, :, 1] = 0.0
+    data["grf"][:, 50::100, 1] = 0.5
     data["terminated"][1, 100] = True
     assert not envelope.command_result(Rollout(data, np.zeros((n, 4)), 0.01, t), "x", (1.0, 0.0, 1.0)).met
     lin[1, :, 0] = 0.0  # robot 1 does not walk: mean error 0.5 > 0.25
