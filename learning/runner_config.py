@@ -94,7 +94,7 @@ PROFILES["cpu_oscillators"] = Profile(
 # stage and leaves coupled robots settling worse (E39). The paper's [256, 256, 128] networks and a charge on
 # every swing contact in the second stage stop the slow gaits swinging between checkpoints, which they did with
 # [128, 128, 64] and without the charge (E42-E50): with both, the last checkpoint meets both goals on three
-# seeds (E52). The CPU recipe of mini_cheetah_osc: about 70 minutes on two idle cores.
+# seeds (E52). The CPU recipe of mini_cheetah_osc: about 70 minutes on two idle cores (ORC-100 seed 0: 68.9).
 PROFILES["cpu_envelope"] = Profile(
     "cpu_oscillators with the paper's kinds of command (v_x from {-1, 0, 1, 2, 3} m/s, v_y +-0.75, yaw +-2, "
     "20 % turns on the spot), [256, 256, 128] networks, 1200 iterations: relative tracking errors, then from "
