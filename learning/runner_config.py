@@ -57,7 +57,7 @@ PROFILES: dict[str, Profile] = {
             "train.algorithm.entropy_coef=0.005",
             "train.actor.hidden_dims=[128, 128, 64]",
             "train.critic.hidden_dims=[128, 128, 64]",
-            # Measured and shipped with the released quartic; the command envelope's recipe study
+            # Measured with the released quartic (the archived forward-only set); the envelope recipe study
             # (docs/recipe-study.md, E15-E17) changes the term together with the commands.
             "rewards.yaw_tracking=released_quartic",
         ),

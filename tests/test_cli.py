@@ -410,12 +410,8 @@ def test_print_config_shows_the_resolved_configs_as_set_keys_and_writes_nothing(
     assert data["train"]["num_steps_per_env"] == 8
 
 
-STUDY_POLICY = os.path.join(REPO, "resources", "study", "E15_ORC_111")
-
-
 def test_viewer_arrow_keys_turn_robot_0(monkeypatch, tmp_path, capsys):
-    """The viewer's left arrow twice (+1 rad/s yaw) turns robot 0 by > 0.5 rad in 2 s: with the recipe study's
-    E15 ORC-111, which was trained to turn (the shipped policies walk forward only)."""
+    """The viewer's left arrow twice (+1 rad/s yaw) turns the shipped ORC-111's robot 0 by > 0.5 rad in 2 s."""
     import math
 
     import mujoco.viewer
@@ -431,7 +427,7 @@ def test_viewer_arrow_keys_turn_robot_0(monkeypatch, tmp_path, capsys):
             pass
 
     monkeypatch.setattr(mujoco.viewer, "launch_passive", lambda *a, **k: Window())
-    args = play.build_parser().parse_args(["--load_run", STUDY_POLICY, "--num_envs", "1", "--num_threads", "1",
+    args = play.build_parser().parse_args(["--shipped", "--orc", "111", "--num_envs", "1", "--num_threads", "1",
                                            "--headless", "--log_root", str(tmp_path)])
     session = play.Session(args)
     viewer = play.Viewer(session, [1.0, 0.0, 0.0])

@@ -235,12 +235,17 @@ def test_a_run_from_before_a_reward_term_resumes_into_a_folder_that_loads(run_co
     assert runs.load_run_configs(resumed)[1].rewards.weights["swing_contact"] == 0.0
 
 
+FORWARD_ONLY_POLICY = os.path.join(runs.REPO_ROOT, "resources", "policies_forward_only", "ORC_111", "seed0")
+
+
 def test_older_runs_keep_the_yaw_term_they_trained_with():
-    # The shipped policies predate rewards.yaw_tracking and trained with the released quartic; a run that
-    # names its term keeps it.
+    # The archived forward-only set predates rewards.yaw_tracking and trained with the released quartic; a run
+    # that names its term keeps it.
+    _, archived, _ = runs.load_run_configs(FORWARD_ONLY_POLICY)
+    assert runs.run_format(FORWARD_ONLY_POLICY) == 0
+    assert archived.rewards.yaw_tracking == "released_quartic" and archived.osc.standing_rule == "lin_vel_x"
     _, shipped, _ = runs.load_run_configs(runs.shipped_policy_dir("111"))
-    assert runs.run_format(runs.shipped_policy_dir("111")) == 0
-    assert shipped.rewards.yaw_tracking == "released_quartic" and shipped.osc.standing_rule == "lin_vel_x"
+    assert shipped.rewards.yaw_tracking == "sqexp" and shipped.osc.standing_rule == "command"
 
 
 def test_a_format_0_run_that_names_its_yaw_term_keeps_it(run_copy):
