@@ -64,7 +64,7 @@ def test_sweep_trains_skips_and_resumes(tmp_path):
     import plot_training_curves
 
     steps, rewards = plot_training_curves.curves(str(run_dir))["Train/mean_reward"]
-    assert steps == [16 * 4, 2 * 16 * 4]  # iterations 1 and 2, in env steps
+    assert steps == [16 * 4]  # iteration 1; iteration 2 opens the resumed file's restart window (next test)
     assert plot_training_curves.main(["--runs", str(tmp_path), "--out", str(tmp_path / "curves.png")]) == 0
     assert (tmp_path / "curves.png").stat().st_size > 10_000
 
@@ -121,3 +121,27 @@ def test_num_threads_caps_torch_while_the_sweep_trains(tmp_path, monkeypatch):
         assert seen == [1] and torch.get_num_threads() == 2  # capped while training, restored after
     finally:
         torch.set_num_threads(before)
+
+
+def test_training_curves_leave_out_a_resumed_runs_restart_window(tmp_path):
+    """After a resume the episode statistics dip for one episode length (every robot restarts part-way through
+    its episode): those iterations come from the earlier events file where it has them, else are left out."""
+    from torch.utils.tensorboard import SummaryWriter
+
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
+    import plot_training_curves
+
+    assert sweep.main(["--out", str(tmp_path), "--orcs", "111", "--seeds", "0", *TINY, "--max_iterations", "1"]) == 0
+    run_dir = tmp_path / "ORC_111" / "seed0"
+    for f in run_dir.glob("events.out.tfevents.*"):
+        f.unlink()
+    # 0.05 s episodes at 100 Hz are 5 control steps: a restart window of two iterations of 4 steps.
+    for name, first, last, value in (("1.first", 0, 4, 1.0), ("2.resumed", 3, 9, 2.0)):
+        with SummaryWriter(str(tmp_path / name)) as w:
+            for step in range(first, last + 1):
+                w.add_scalar("Train/mean_reward", value, step)
+        (event,) = (tmp_path / name).glob("events.out.tfevents.*")
+        event.rename(run_dir / f"events.out.tfevents.{name}")
+    steps, rewards = plot_training_curves.curves(str(run_dir))["Train/mean_reward"]
+    assert steps == [(s + 1) * 16 * 4 for s in range(10)]
+    assert rewards == [1.0] * 5 + [2.0] * 5  # 3 and 4 from the first file, 5-9 from the resumed one

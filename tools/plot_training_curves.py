@@ -2,13 +2,15 @@
 
     python tools/plot_training_curves.py --runs logs/sweep --out docs/training_curves.png
 
-Reads each run's tensorboard events (ORC_<xyz>/seed<k>/) and draws one line per configuration.
+Reads each run's tensorboard events (ORC_<xyz>/seed<k>/, every events file of a resumed run, later files winning
+where iterations overlap) and draws one line per configuration.
 """
 
 from __future__ import annotations
 
 import argparse
 import glob
+import math
 import os
 import sys
 
@@ -33,12 +35,19 @@ def curves(run_dir: str) -> dict[str, tuple[list[float], list[float]]]:
     _, env_cfg, train_cfg = runs.load_run_configs(run_dir)
     steps_per_iteration = env_cfg.env.num_envs * train_cfg.num_steps_per_env
     out: dict[str, dict[int, float]] = {tag: {} for tag, _ in PANELS}
+    # A resumed run restarts every robot's episode at a random point of its length, so for one episode length
+    # its episode statistics count only episodes cut short: a dip of the logging, not of the policy, left out.
+    restart_iterations = math.ceil(env_cfg.env.episode_length_s * env_cfg.control.frequency_hz
+                                   / train_cfg.num_steps_per_env)
     for path in sorted(glob.glob(os.path.join(run_dir, "events.out.tfevents.*"))):
         acc = EventAccumulator(path)
         acc.Reload()
         for tag in out:
             if tag in acc.Tags()["scalars"]:
-                out[tag].update({e.step: e.value for e in acc.Scalars(tag)})
+                events = acc.Scalars(tag)
+                if events and events[0].step > 0:
+                    events = [e for e in events if e.step >= events[0].step + restart_iterations]
+                out[tag].update({e.step: e.value for e in events})
     return {tag: ([(s + 1) * steps_per_iteration for s in sorted(v)], [v[s] for s in sorted(v)])
             for tag, v in out.items()}
 
