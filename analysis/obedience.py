@@ -293,8 +293,8 @@ def plot(results: list[Obedience]):
         top.bar(pos, [100 * r.started[g].obeyed for r in results], width, color=GAIT_COLORS[g], label=g)
         bottom.bar(pos, [100 * r.started[g].stance_share for r in results], width, color=GAIT_COLORS[g])
     for i, r in enumerate(results):
-        if all(s.identical for s in r.started.values()):
-            top.text(i, 102, "identical\nrobots", ha="center", va="bottom", fontsize=5)
+        if all(s.identical for s in r.started.values()):  # vertical, so neighbouring policies' notes never overlap
+            top.text(i, 101, "alike", ha="center", va="bottom", fontsize=5, rotation=90)
     top.set_ylabel("walks the started\ngait at 10 s [%]")
     top.set_ylim(0, 118)
     top.set_title("Oscillators started in a gait\n" r"($\sigma$ = 0, 1 m/s; gaits from foot contacts)")
@@ -303,7 +303,10 @@ def plot(results: list[Obedience]):
     bottom.set_ylabel("GRF impulse in\nstance half [%]")
     bottom.set_ylim(0, 100)
     bottom.set_xticks(x)
-    bottom.set_xticklabels([f"ORC {r.orc}" for r in results], rotation=0)
+    # ORC string over training seed, upright while they fit beside each other, else turned.
+    bottom.set_xticklabels([f"{r.orc}\n{Path(r.policy).name.replace('seed', 's')}" for r in results],
+                           rotation=0 if len(results) <= 12 else 90, fontsize=6)
+    bottom.set_xlabel("ORC, training seed (identical robots: alike)")
     return fig
 
 
