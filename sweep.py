@@ -105,10 +105,12 @@ def train_one(args, orc: str, seed: int, stop: StopRequest) -> str:
 
 
 def _check_same_configs(run_dir: str, env_cfg, train_cfg) -> None:
-    """A run is only continued with the settings it was started with (iterations aside)."""
+    """A run is only continued with the settings it was started with (iterations and physics threads aside)."""
     saved_env = to_dict(runs.load_run_yaml(run_dir, type(env_cfg), runs.ENV_YAML))
     saved_train = runs.load_run_yaml(run_dir, type(train_cfg), runs.TRAIN_YAML)
     saved_train = to_dict(apply_overrides(saved_train, [f"max_iterations={train_cfg.max_iterations}"]))
+    # How many cores step the physics is the machine's, not the experiment's: a run may continue on another one.
+    saved_env["sim"]["num_threads"] = env_cfg.sim.num_threads
     for name, saved, now in (("env", saved_env, to_dict(env_cfg)), ("train", saved_train, to_dict(train_cfg))):
         if saved != now:
             key = _first_difference(saved, now)

@@ -77,6 +77,12 @@ def test_resuming_with_other_settings_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "rewards.weights.torques differs" in err[0]
     assert runs.list_checkpoints(str(tmp_path / "ORC_111" / "seed0")) == [0, 1]
+    # Another machine's thread count is not another experiment: the run continues.
+    more_threads = list(TINY)
+    more_threads[TINY.index("--num_threads") + 1] = "2"
+    assert sweep.main(["--out", str(tmp_path), "--orcs", "111", "--seeds", "0", *more_threads,
+                       "--max_iterations", "2"]) == 0
+    assert runs.list_checkpoints(str(tmp_path / "ORC_111" / "seed0")) == [0, 1, 2]
 
 
 @pytest.mark.parametrize("orc", ["12", "abc"])
