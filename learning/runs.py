@@ -490,10 +490,10 @@ def export_dir(run_dir: str, log_root: str) -> str:
     return os.path.join(run_dir, EXPORT_DIR)
 
 
-def training_seconds(run_dir: str, until: int | None = None) -> float | None:
+def training_seconds(run_dir: str, until: int | None = None, resumed_chain: bool = True) -> float | None:
     """Seconds a train.py run spent training (env stepping and PPO updates, as its TensorBoard events record
-    them) in its iterations before `until`, plus those of the run it was resumed from, up to that checkpoint;
-    None where a run of the chain has no such record."""
+    them) in its iterations before `until`, plus (unless not `resumed_chain`) those of the run it was resumed
+    from, up to that checkpoint; None where a run of the chain has no such record."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # slow to import: here only
 
     accumulator = EventAccumulator(run_dir, size_guidance={"scalars": 0})
@@ -503,7 +503,7 @@ def training_seconds(run_dir: str, until: int | None = None) -> float | None:
         return None
     seconds = sum(e.value for tag in tags for e in accumulator.Scalars(tag) if until is None or e.step < until)
     resumed_from = load_run_configs(run_dir)[2].resumed_from
-    if not resumed_from:
+    if not resumed_from or not resumed_chain:
         return seconds
     earlier = os.path.dirname(resumed_from)
     if not is_run_dir(earlier):

@@ -76,3 +76,23 @@ def test_wall_time_of_a_resumed_run_counts_the_training_before_its_checkpoint(tm
     assert runs.training_seconds(resumed) == pytest.approx(own + before)
     shutil.rmtree(first)  # the run it was resumed from is gone: its time is unknown, not zero
     assert runs.training_seconds(resumed) is None
+
+
+def test_a_shipped_policy_trained_on_carries_its_provenance(sweep_runs, tmp_path, monkeypatch):
+    monkeypatch.setattr(ship_policies, "measure", lambda policy_dir, num_threads: {k: 0 for k in ship_policies.METRICS})
+    out = str(tmp_path / "policies")
+    assert ship_policies.main(["--runs", str(sweep_runs), "--out", out, "--seed", "3", "--machine", "first"]) == 0
+    (first,) = ship_policies.read_manifest(out)
+    shipped = runs.shipped_policy_dir("111", 3, out)
+    assert train.main(["--resume", "--load_run", shipped, "--log_root", str(tmp_path / "longer"), "--max_iterations",
+                       "1", "--num_threads", "1", "--headless"]) == 0
+    longer = tmp_path / "continued" / "ORC_111" / "seed3"  # the layout ship_policies reads
+    shutil.copytree(only_run(tmp_path / "longer"), longer)
+    own = runs.training_seconds(str(longer), resumed_chain=False)
+    assert ship_policies.main(["--runs", str(tmp_path / "continued"), "--out", out, "--machine", "second",
+                               "--commit", "abc1234"]) == 0
+    (row,) = ship_policies.read_manifest(out)
+    assert row["iterations"] == "2" and os.listdir(shipped) and "model_2.pt" in os.listdir(shipped)
+    assert float(row["wall_time_s"]) == pytest.approx(float(first["wall_time_s"]) + own, abs=0.1)
+    assert row["commit"] == f"{first['commit']} then abc1234"
+    assert row["machine"] == "iterations 1-1: first; 2-2: second"

@@ -19,13 +19,16 @@ Each shipped policy is then measured at 1 m/s in the evaluation setting:
     trained coupling, 8 s after a 2 s start: commands met, the largest per-axis error, falls.
 resources/policies/manifest.csv records configuration, command, commit, seed, iterations, wall time (a
 sweep's own record, else the training time the run's TensorBoard events add up to, through the run it was
-resumed from), the machine that trained it and the measured metrics.
+resumed from), the machine that trained it and the measured metrics. A run resumed from a shipped policy's
+checkpoint (say, to train it longer) carries that policy's row on: its wall time is added, and its commit and
+machine are kept beside this run's.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import filecmp
 import os
 import shutil
 import subprocess
@@ -93,16 +96,24 @@ def ship(args) -> list[dict]:
     return rows
 
 
+def continued_row(run_dir: str, orc: str, seed: int, out: str) -> dict | None:
+    """The manifest row of the shipped policy `run_dir` was resumed from (its checkpoint, byte for byte), if any."""
+    resumed_from = runs.load_run_configs(run_dir)[2].resumed_from
+    if not resumed_from or not os.path.isfile(resumed_from):
+        return None
+    iteration = runs.checkpoint_iteration(resumed_from)
+    shipped = runs.checkpoint_path(runs.shipped_policy_dir(orc, seed, out), iteration)
+    if not os.path.isfile(shipped) or not filecmp.cmp(resumed_from, shipped, shallow=False):
+        return None
+    return next((row for row in read_manifest(out) if (row["orc"], int(row["seed"]), int(row["iterations"]))
+                 == (orc, seed, iteration)), None)
+
+
 def ship_run(run_dir: str, orc: str, args, head: str) -> dict:
     iteration = max(runs.list_checkpoints(run_dir))
     seed = runs.load_run_configs(run_dir)[2].seed
-    target = runs.shipped_policy_dir(orc, seed, args.out)
-    os.makedirs(target, exist_ok=True)
-    for old in os.listdir(target):
-        os.remove(os.path.join(target, old))
-    for name in (runs.ENV_YAML, runs.TRAIN_YAML, os.path.basename(runs.checkpoint_path(run_dir, iteration))):
-        shutil.copy2(os.path.join(run_dir, name), os.path.join(target, name))
-    loaded = runs.load_policy(target)
+    commit = args.commit or runs.trained_commit(run_dir) or head
+    machine = args.machine
     status_path = os.path.join(run_dir, "sweep_status.yaml")  # a run trained by train.py has none
     status = {}
     if os.path.isfile(status_path):
@@ -112,10 +123,24 @@ def ship_run(run_dir: str, orc: str, args, head: str) -> dict:
     if wall_time is None:
         seconds = runs.training_seconds(run_dir)
         wall_time = "" if seconds is None else round(seconds, 1)
+    earlier = continued_row(run_dir, orc, seed, args.out)
+    if earlier is not None:  # a shipped policy trained on: its provenance carries over
+        own = runs.training_seconds(run_dir, resumed_chain=False)
+        wall_time = ("" if own is None or not earlier["wall_time_s"]
+                     else round(float(earlier["wall_time_s"]) + own, 1))
+        commit = f"{earlier['commit']} then {commit}"
+        machine = (f"iterations 1-{earlier['iterations']}: {earlier['machine']}; "
+                   f"{int(earlier['iterations']) + 1}-{iteration}: {machine}")
+    target = runs.shipped_policy_dir(orc, seed, args.out)
+    os.makedirs(target, exist_ok=True)
+    for old in os.listdir(target):
+        os.remove(os.path.join(target, old))
+    for name in (runs.ENV_YAML, runs.TRAIN_YAML, os.path.basename(runs.checkpoint_path(run_dir, iteration))):
+        shutil.copy2(os.path.join(run_dir, name), os.path.join(target, name))
+    loaded = runs.load_policy(target)
     return {
-        "orc": orc, "command_mps": 1.0, "commit": args.commit or runs.trained_commit(run_dir) or head,
-        "seed": seed, "iterations": iteration,
-        "wall_time_s": wall_time, "machine": args.machine, "profile": loaded.train_cfg.profile,
+        "orc": orc, "command_mps": 1.0, "commit": commit, "seed": seed, "iterations": iteration,
+        "wall_time_s": wall_time, "machine": machine, "profile": loaded.train_cfg.profile,
         **measure(target, args.num_threads),
     }
 
