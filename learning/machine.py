@@ -46,7 +46,7 @@ def cpu_profile(task: str | None) -> str:
 
 def cpu_recipes_text() -> str:
     """The CPU recipes as the help texts quote them, read from the profiles, e.g. '1024 robots x 24 steps:
-    cpu_envelope, 1200 iterations, for mini_cheetah_osc; cpu_fast, 300 iterations, for other tasks'."""
+    cpu_envelope, 1600 iterations, for mini_cheetah_osc; cpu_fast, 300 iterations, for other tasks'."""
     from gym_envs.registry import TASKS
     from learning.runner_config import profile_setting
 

@@ -114,10 +114,11 @@ def test_every_profile_applies_to_every_task():
         profile_overrides("nope")
 
 
-def test_cpu_envelope_switches_stage_halfway_and_its_env_draws_the_stated_starts():
+def test_cpu_envelope_switches_stage_at_600_and_its_env_draws_the_stated_starts():
     env_cfg, train = apply_split_overrides(env_cfg_class(TASK)(), TrainCfg(), profile_overrides("cpu_envelope", TASK))
-    stage, halfway = env_cfg.rewards.second_stage, train.max_iterations // 2 * train.num_steps_per_env
-    assert stage.start_step == env_cfg.osc.second_stage.start_step == halfway  # iteration 600 of 1200
+    stage, switch = env_cfg.rewards.second_stage, 600 * train.num_steps_per_env
+    assert train.max_iterations == 1600  # E52's 1200 and 400 more, which ORC-110 needs for 3 m/s
+    assert stage.start_step == env_cfg.osc.second_stage.start_step == switch  # iteration 600, halfway through E52
     assert stage.tracking_error == "absolute" and env_cfg.rewards.tracking_error == "relative"
     assert stage.weights == {"swing_grf": 10.0, "stance_grf": 10.0, "swing_contact": 5.0} != {
         k: env_cfg.rewards.weights[k] for k in stage.weights}
@@ -126,7 +127,7 @@ def test_cpu_envelope_switches_stage_halfway_and_its_env_draws_the_stated_starts
     # with bound drawn three times as often as each other gait.
     env_cfg.env.num_envs, env_cfg.sim.num_threads = 2048, 1
     env = make_env(TASK, env_cfg)
-    for step, (share, bound) in ((0, (0.25, 0.25)), (halfway, (0.375, 0.5))):
+    for step, (share, bound) in ((0, (0.25, 0.25)), (switch, (0.375, 0.5))):
         env.continue_from_step(step)
         env.reset()
         uncoupled = env.coupling_on[:, 0] == 0
