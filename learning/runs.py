@@ -492,8 +492,8 @@ def export_dir(run_dir: str, log_root: str) -> str:
 
 def training_seconds(run_dir: str, until: int | None = None, resumed_chain: bool = True) -> float | None:
     """Seconds a train.py run spent training (env stepping and PPO updates, as its TensorBoard events record
-    them) in its iterations before `until`, plus (unless not `resumed_chain`) those of the run it was resumed
-    from, up to that checkpoint; None where a run of the chain has no such record."""
+    them) in its iterations before `until`, plus, with `resumed_chain`, those of the run it was resumed from, up
+    to that checkpoint; None where a run of the chain has no such record."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # slow to import: here only
 
     accumulator = EventAccumulator(run_dir, size_guidance={"scalars": 0})
