@@ -75,6 +75,10 @@ class OscillatorCfg:
     uncoupled_commands: str = "any"
     stand_threshold: float = 0.5  # a standing speed (standing_rule) below this uses the standing parameters
     standing_rule: str = "lin_vel_x"  # one of gym_envs.oscillators.STANDING_RULES
+    # Pay the phase rewards at a standing command too (the released code). Off, a robot told to stand has
+    # no reward for stepping: with C = 0 its oscillators keep turning from their random start while it
+    # stands, and the phase rewards would pay it to step in place in that pattern (docs/recipe-study.md).
+    phase_rewards_standing: bool = True
     # Quirk switches of the released code, off by default:
     hold_grf: bool = False  # integrate all substeps with the previous control step's last force
     grf_normaliser_mass: float = 0.0  # [kg]; 0 uses the model's mass (8.952), the release used 8.292
@@ -303,14 +307,22 @@ class MiniCheetahOsc(MiniCheetah):
         return self.phase_vel
 
     # phase rewards: [0, pi) is swing (contact penalised), [pi, 2 pi) stance (contact rewarded)
+    def _phase_reward_sin(self) -> torch.Tensor:
+        """(N, legs) sin(phase), zero for robots at a standing command where osc.phase_rewards_standing is off."""
+        sin = torch.sin(self.phase)
+        if self.cfg.osc.phase_rewards_standing:
+            return sin
+        speed = oscillators.standing_speed(self.commands, self.cfg.osc.standing_rule)
+        return sin * (speed >= self.cfg.osc.stand_threshold).unsqueeze(1)
+
     def _reward_swing_grf(self):
-        return -torch.sum(torch.clamp(torch.sin(self.phase), min=0.0) * self.grf, dim=1)
+        return -torch.sum(torch.clamp(self._phase_reward_sin(), min=0.0) * self.grf, dim=1)
 
     def _reward_stance_grf(self):
-        return torch.sum(torch.clamp(-torch.sin(self.phase), min=0.0) * self.grf, dim=1)
+        return torch.sum(torch.clamp(-self._phase_reward_sin(), min=0.0) * self.grf, dim=1)
 
     def _reward_swing_contact(self):
         # Each foot in contact during its swing half, whatever its force: a light extra step costs as
         # much as a heavy one, where swing_grf charges it by its small force (docs/recipe-study.md, E47).
         contact = (self.grf > SWING_CONTACT_FORCE).float()
-        return -torch.sum(torch.clamp(torch.sin(self.phase), min=0.0) * contact, dim=1)
+        return -torch.sum(torch.clamp(self._phase_reward_sin(), min=0.0) * contact, dim=1)

@@ -53,8 +53,8 @@ LOCK_FILE = ".lock"
 # Format 2: sim.cuda_graphs. Format 3: rewards.tracking_error. Format 4: rewards.second_stage,
 # osc.uncoupled_gait_weights. Format 5: osc.second_stage. Format 6: osc.uncoupled_commands.
 # Format 7: rewards.weights.swing_contact (a new reward term, 0 by default). Format 8:
-# train.obs_normalization_frozen_from.
-RUN_FORMAT = 8
+# train.obs_normalization_frozen_from. Format 9: osc.phase_rewards_standing.
+RUN_FORMAT = 9
 # What format-0 runs trained with where a key added since defaults to something else: the yaw-rate term
 # became the paper's squared exponential together with the key that names it (issue 26).
 FORMAT_0_VALUES = {ENV_YAML: {"rewards.yaw_tracking": "released_quartic"}}

@@ -480,7 +480,8 @@ def config_keys_digest() -> str:
 # The config keys' digest that each run format was written with (format 2's keys labelled by task since the
 # registry pairs each task with its configs: the keys are those of the class-named digest 9eacc93b081d44ec).
 KEYS_OF_FORMAT = {2: "6b1159e500700287", 3: "5f2bc8c84249e8a0", 4: "779b2d189df46412", 5: "39e700cc1b18be7b",
-                  6: "a94f8f2392378377", 7: "a94f8f2392378377", 8: "1ea1c33f8f452d03"}
+                  6: "a94f8f2392378377", 7: "a94f8f2392378377", 8: "1ea1c33f8f452d03",
+                  9: "77a868b996f55a60"}
 
 
 def test_config_keys_change_only_with_the_run_format():

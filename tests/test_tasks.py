@@ -175,6 +175,21 @@ def test_phase_rewards_sign_and_scale():
     assert env._reward_swing_grf().tolist() == pytest.approx([0.0, 0.0])
 
 
+def test_phase_rewards_standing_off_leaves_standing_robots_unpaid():
+    env = quiet_standing(2, overrides_extra=["osc.phase_rewards_standing=false", "rewards.weights.swing_contact=1.0"])
+    env.commands[1, 0] = 1.0  # robot 0 told to stand, robot 1 to walk
+    env.phase[:] = torch.tensor([[0.5 * math.pi] * 4, [0.5 * math.pi] * 4])  # both in swing, both loaded
+    env.grf[:] = 0.25
+    assert env._reward_swing_grf().tolist() == pytest.approx([0.0, -1.0])
+    assert env._reward_swing_contact().tolist() == pytest.approx([0.0, -4.0])
+    env.phase[:] = 1.5 * math.pi  # stance
+    assert env._reward_stance_grf().tolist() == pytest.approx([0.0, 1.0])
+    env.commands[0, 2] = 1.0  # a turn on the spot is moving under the 'command' rule, standing under |v_x|
+    assert env._reward_stance_grf()[0] == pytest.approx(0.0)
+    env.cfg.osc.standing_rule = "command"
+    assert env._reward_stance_grf()[0] == pytest.approx(1.0)
+
+
 def test_swing_contact_counts_swing_contacts_whatever_their_force():
     env = quiet_standing(3, overrides_extra=["rewards.weights.swing_contact=1.0"])
     env.phase[:] = torch.tensor([[0.5 * math.pi] * 4, [0.5 * math.pi] * 4, [1.5 * math.pi] * 4])
