@@ -291,8 +291,7 @@ class MiniCheetahOsc(MiniCheetah):
         # Which relative phases the moving robots' oscillators hold right now: if coupling pulls every
         # robot into one pattern, the policy never sees (and never learns to follow) the others.
         # Counted on the device (no host sync); a step with no robot moving logs zeros.
-        speed = oscillators.standing_speed(self.commands, self.cfg.osc.standing_rule)
-        moving = (speed >= self.cfg.osc.stand_threshold).float()
+        moving = self._moving_command().float()
         labels, _ = oscillators.classify_rpd(oscillators.relative_phases(self.phase))
         counts = torch.zeros(len(oscillators.GAIT_NAMES) + 1, device=self.device).index_add_(0, labels, moving)
         shares = counts / moving.sum().clamp(min=1.0)
@@ -306,14 +305,18 @@ class MiniCheetahOsc(MiniCheetah):
     def _obs_oscillators_vel(self):
         return self.phase_vel
 
+    def _moving_command(self) -> torch.Tensor:
+        """(N,) bool: the command is not a standing one under osc.standing_rule and osc.stand_threshold."""
+        speed = oscillators.standing_speed(self.commands, self.cfg.osc.standing_rule)
+        return speed >= self.cfg.osc.stand_threshold
+
     # phase rewards: [0, pi) is swing (contact penalised), [pi, 2 pi) stance (contact rewarded)
     def _phase_reward_sin(self) -> torch.Tensor:
         """(N, legs) sin(phase), zero for robots at a standing command where osc.phase_rewards_standing is off."""
         sin = torch.sin(self.phase)
         if self.cfg.osc.phase_rewards_standing:
             return sin
-        speed = oscillators.standing_speed(self.commands, self.cfg.osc.standing_rule)
-        return sin * (speed >= self.cfg.osc.stand_threshold).unsqueeze(1)
+        return sin * self._moving_command().unsqueeze(1)
 
     def _reward_swing_grf(self):
         return -torch.sum(torch.clamp(self._phase_reward_sin(), min=0.0) * self.grf, dim=1)
