@@ -17,7 +17,7 @@ Usage: python -m analysis.envelope [--runs DIR] --out DIR [--quick]
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +64,9 @@ class CommandResult:
     gaits: dict[str, float]  # share of robots per contact gait at the end (or NO_STEPS, IRREGULAR)
     alike: bool  # the robots are one sample repeated (Rollout.robots_alike)
     step_frequency: float  # [Hz] touchdowns per second per foot, mean over feet and robots
+    # measure(reward_terms=True): each reward term as weighted [1/s], mean over the window and the robots
+    # that did not fall; empty otherwise
+    rewards: dict[str, float] = field(default_factory=dict)
 
     @property
     def met(self) -> bool:
@@ -90,15 +93,26 @@ def command_result(rollout, name: str, command) -> CommandResult:
         gaits={str(g): c / len(labels) for g, c in zip(names, counts)},
         alike=rollout.robots_alike(),
         step_frequency=float(np.mean(steps) / seconds),
+        rewards=_reward_rates(rollout),
     )
+
+
+def _reward_rates(rollout) -> dict[str, float]:
+    if "reward_terms" not in rollout.data:
+        return {}
+    standing = ~rollout.fell()
+    if not standing.any():
+        return {name: float("nan") for name in rollout.info["reward_terms"]}
+    rates = rollout.data["reward_terms"][standing].mean(axis=(0, 1))
+    return {name: float(rate) for name, rate in zip(rollout.info["reward_terms"], rates)}
 
 
 def measure(policies, commands: dict[str, tuple[float, float, float]] | None = None, robots: int = QUICK["robots"],
             warmup_s: float = QUICK["warmup_s"], measure_s: float = QUICK["measure_s"],
             settings: EvalSettings = EvalSettings(), seed: int = 0, num_threads: int = 0,
-            progress: bool = True) -> list[CommandResult]:
+            progress: bool = True, reward_terms: bool = False) -> list[CommandResult]:
     """Every policy at every command (default ENVELOPE), all in shared batches; results per policy, in the
-    commands' order."""
+    commands' order. reward_terms: also what each reward term pays (CommandResult.rewards)."""
     commands = ENVELOPE if commands is None else commands
     if measure_s < gait.CHECKPOINT_INTERVAL:
         raise ValueError(f"measure_s={measure_s:g} is shorter than one {gait.CHECKPOINT_INTERVAL:g} s gait checkpoint")
@@ -106,7 +120,8 @@ def measure(policies, commands: dict[str, tuple[float, float, float]] | None = N
     warmup = int(round(warmup_s / dt))
     jobs = [Job(p, robots, tag=name, command=c) for p in policies for name, c in commands.items()]
     rollouts = run_jobs(jobs, warmup + int(round(measure_s / dt)), settings,
-                        record=("grf", "base_lin_vel", "base_ang_vel", "terminated"), record_from=warmup,
+                        record=("grf", "base_lin_vel", "base_ang_vel", "terminated")
+                        + (("reward_terms",) if reward_terms else ()), record_from=warmup,
                         seed=seed, num_threads=num_threads, progress=progress, label="envelope")
     return [command_result(r, j.tag, j.command) for j, r in zip(jobs, rollouts)]
 

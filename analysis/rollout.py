@@ -73,6 +73,7 @@ class PolicyRun:
     policy: Policy
     task: str = DEFAULT_TASK
     path: str | None = None
+    trained_steps: int = 0  # control steps per env the checkpoint trained (its iteration x steps per iteration)
 
     @property
     def orc(self) -> str:
@@ -145,6 +146,7 @@ def load_policy_run(run_dir: str, checkpoint: int = -1, name: str | None = None)
         policy=loaded.policy,
         task=loaded.task,
         path=run_dir,
+        trained_steps=loaded.iteration * loaded.train_cfg.num_steps_per_env,
     )
 
 
@@ -187,11 +189,15 @@ def eval_overrides(settings: EvalSettings, cfg) -> list[str]:
     return overrides
 
 
-def eval_env_cfg(run_cfg, settings: EvalSettings, num_envs: int, seed: int = 0, num_threads: int = 0):
+def eval_env_cfg(run_cfg, settings: EvalSettings, num_envs: int, seed: int = 0, num_threads: int = 0,
+                 trained_steps: int = 0):
     """A copy of the run's env config in the evaluation setting, on the CPU backend (the run's config is not
-    modified)."""
+    modified). A checkpoint trained past its second reward stage is paid that stage's rewards from the first
+    step (the env switches itself; rewards change what is recorded, never what the robots do)."""
     extra = [f"env.num_envs={int(num_envs)}", f"env.seed={int(seed)}", f"sim.num_threads={int(num_threads)}",
              "env.device=cpu", "sim.backend=mujoco"]
+    if 0 < run_cfg.rewards.second_stage.start_step < trained_steps:
+        extra.append("rewards.second_stage.start_step=1")
     return apply_overrides(run_cfg, eval_overrides(settings, run_cfg) + extra)
 
 
@@ -208,7 +214,7 @@ def _cfg_key(task: str, cfg) -> str:
 @dataclass(frozen=True)
 class Signal:
     read: Callable[[Any], torch.Tensor]
-    shape: tuple[int, ...]
+    shape: tuple[int, ...] | Callable[[Any], tuple[int, ...]]  # or the env's, where the task decides it
     dtype: Any = np.float32
     doc: str = ""
     per_robot_draw: bool = False  # depends on the robot's own random draw, not only on the policy's inputs
@@ -223,6 +229,9 @@ SIGNALS: dict[str, Signal] = {
     "command": Signal(lambda e: e.commands, (3,), doc="command (v_x, v_y, yaw rate)"),
     "joint_pos": Signal(lambda e: e.joint_pos, (12,), doc="joint positions [rad]"),
     "terminated": Signal(lambda e: e.terminated, (), np.bool_, doc="the robot fell (trunk contact) on this step"),
+    "reward_terms": Signal(lambda e: torch.stack(list(e.reward_terms.values()), dim=1) / e.dt,
+                           lambda e: (len(e.reward_terms),), per_robot_draw=True,
+                           doc="weighted reward per term [1/s], in the order of Rollout.info['reward_terms']"),
 }
 DEFAULT_RECORD = ("grf", "phase", "base_lin_vel", "base_height", "terminated")
 
@@ -307,7 +316,9 @@ def rollout(
     pushes = _push_plan(n, push_step, push_delta)
 
     n_rec = max(num_steps - record_from, 0)
-    buffers = {name: np.zeros((n, n_rec) + SIGNALS[name].shape, SIGNALS[name].dtype) for name in record}
+    shapes = {name: SIGNALS[name].shape(env) if callable(SIGNALS[name].shape) else SIGNALS[name].shape
+              for name in record}
+    buffers = {name: np.zeros((n, n_rec) + shapes[name], SIGNALS[name].dtype) for name in record}
     initial_phase = env.phase.detach().cpu().numpy().copy()
     # A bar on a terminal only; run_jobs prints one summary line per call either way.
     bar = tqdm(total=num_steps, desc=label, unit="step", leave=False, disable=not (progress and sys.stderr.isatty()))
@@ -325,7 +336,8 @@ def rollout(
     for name, buf in buffers.items():
         if not SIGNALS[name].per_robot_draw:
             buf[:] = buf[sample]
-    return Rollout(buffers, initial_phase, env.dt, num_steps, record_from, sample=sample)
+    info = {"reward_terms": list(env.reward_terms)} if "reward_terms" in record else {}
+    return Rollout(buffers, initial_phase, env.dt, num_steps, record_from, info=info, sample=sample)
 
 
 def _samples(env, policy, command: torch.Tensor, push_step, push_delta) -> np.ndarray:
@@ -401,7 +413,11 @@ def run_jobs(
     Jobs whose evaluation configs agree share MuJoCo batches of at most max_batch robots (a job is
     never split); batch b is seeded with seed + b, so results are reproducible for the same jobs.
     """
-    cfgs = [eval_env_cfg(j.run.env_cfg, settings, j.num_envs, seed, num_threads) for j in jobs]
+    # The reward stage only where rewards are recorded: elsewhere it would split batches (and their draws) by
+    # checkpoint for nothing.
+    paid = "reward_terms" in record
+    cfgs = [eval_env_cfg(j.run.env_cfg, settings, j.num_envs, seed, num_threads, j.run.trained_steps if paid else 0)
+            for j in jobs]
     keys = [_cfg_key(j.run.task, c) for j, c in zip(jobs, cfgs)]
     batches = [batch for key in dict.fromkeys(keys) for batch in pack_batches(
         [i for i, k in enumerate(keys) if k == key], lambda i: jobs[i].num_envs, max_batch)]

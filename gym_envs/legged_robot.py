@@ -186,6 +186,7 @@ class LeggedRobot:
         self.tracking_error_form = rewards.tracking_error
         self.reward_stage = 1
         self.episode_sums = {name: torch.zeros(self.num_envs, device=self.device) for name in self.reward_weights}
+        self.reward_terms = {name: torch.zeros(self.num_envs, device=self.device) for name in self.reward_weights}
         self.tracking_error_sum = torch.zeros(self.num_envs, device=self.device)  # of |command_xy - v_xy| [m/s]
 
     def _init_observation_terms(self) -> None:
@@ -286,6 +287,7 @@ class LeggedRobot:
             term = fn() * self.reward_weights[name] * self.dt * alive
             self.rew_buf += term
             self.episode_sums[name] += term
+            self.reward_terms[name] = term  # this step's, for analysis: what a policy is paid for, term by term
         self.rew_buf -= self.cfg.rewards.termination_penalty * self.terminated.float()
 
     def _log_episodes(self, env_ids: torch.Tensor) -> None:

@@ -23,6 +23,7 @@ from analysis.rollout import (
     run_jobs,
 )
 from gym_envs import env_cfg_class, make_env
+from gym_envs.config import apply_overrides
 
 PI = math.pi
 DT = 0.01  # control step [s] of the synthetic records
@@ -273,6 +274,19 @@ def test_eval_overrides_set_the_evaluation_setting():
     assert (cfg.env.num_envs, cfg.env.seed) == (3, 7)
     off = eval_env_cfg(_tiny_run("111").env_cfg, EvalSettings(coupling=0.0, process_noise_std=0.25), 2)
     assert off.osc.orc == "111" and off.osc.coupling_max == 0.0 and off.osc.process_noise_std == 0.25
+
+
+def test_a_checkpoint_past_its_second_reward_stage_is_paid_that_stage_in_evaluation():
+    run = _tiny_run("111")
+    staged = apply_overrides(run.env_cfg, ["rewards.second_stage.start_step=100",
+                                           "rewards.second_stage.weights={tracking_lin_vel: 8.0}"])
+    paid = {}
+    for trained_steps in (100, 101):  # at the stage's start, then past it
+        cfg = eval_env_cfg(staged, EvalSettings(), num_envs=2, num_threads=1, trained_steps=trained_steps)
+        r = rollout(run.policy, cfg, 20, record=("reward_terms",), progress=False)
+        paid[trained_steps] = r.data["reward_terms"][..., r.info["reward_terms"].index("tracking_lin_vel")]
+    assert paid[100].min() > 0  # the rewards change, the robots do not: same trajectory, twice the weight
+    np.testing.assert_allclose(paid[101], 2.0 * paid[100], rtol=1e-5)
 
 
 def test_stacked_policy_routes_rows_to_their_policy():

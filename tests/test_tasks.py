@@ -466,3 +466,14 @@ def test_a_reward_stage_takes_new_entries_by_override_and_refuses_names_that_are
         apply_overrides(staged, ["rewards.second_stage.weights.swing_contct=5.0"]).validate()
     with pytest.raises(ConfigError, match="did you mean 'rewards.weights.swing_contact'"):
         apply_overrides(staged, ["rewards.weights.swing_contct=5.0"])  # rewards.weights itself stays closed
+
+
+def test_each_step_keeps_its_weighted_reward_terms_and_they_add_up_to_the_reward():
+    env = osc_env(3)
+    for _ in range(5):
+        env.step(torch.zeros(3, env.num_actions))
+    assert list(env.reward_terms) == list(env.reward_weights)
+    total = torch.stack(list(env.reward_terms.values())).sum(dim=0)
+    penalty = env.cfg.rewards.termination_penalty * env.terminated.float()
+    assert torch.allclose(total - penalty, env.rew_buf, atol=1e-6)
+    assert env.reward_terms["tracking_lin_vel"].gt(0).all()  # a positive term, weighted and scaled by dt
