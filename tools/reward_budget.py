@@ -31,8 +31,8 @@ def parse_command(text: str) -> tuple[str, tuple[float, float, float]]:
     except ValueError:
         values = ()
     if len(values) != 3:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is neither an envelope command ({', '.join(envelope.ENVELOPE)}) nor 'v_x,v_y,yaw_rate'")
+        names = ", ".join(map(repr, envelope.ENVELOPE))
+        raise argparse.ArgumentTypeError(f"{text!r} is neither an envelope command ({names}) nor 'v_x,v_y,yaw_rate'")
     return text, values
 
 
