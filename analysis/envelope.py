@@ -100,10 +100,10 @@ def command_result(rollout, name: str, command) -> CommandResult:
 def _reward_rates(rollout) -> dict[str, float]:
     if "reward_terms" not in rollout.data:
         return {}
-    standing = ~rollout.fell()
-    if not standing.any():
+    stayed_up = ~rollout.fell()
+    if not stayed_up.any():
         return {name: float("nan") for name in rollout.info["reward_terms"]}
-    rates = rollout.data["reward_terms"][standing].mean(axis=(0, 1))
+    rates = rollout.data["reward_terms"][stayed_up].mean(axis=(0, 1))
     return {name: float(rate) for name, rate in zip(rollout.info["reward_terms"], rates)}
 
 
