@@ -101,7 +101,8 @@ PROFILES["cpu_envelope"] = Profile(
     "cpu_oscillators with the paper's kinds of command (v_x from {-1, 0, 1, 2, 3} m/s, v_y +-0.75, yaw +-2, "
     "20 % turns on the spot), [256, 256, 128] networks, 1600 iterations: relative tracking errors, then from "
     "iteration 600 absolute ones, phase rewards of 10 and every swing contact charged (5), 3/8 of the episodes "
-    "uncoupled with bound drawn 3x (docs/recipe-study.md, E52, then 400 more iterations)",
+    "uncoupled with bound drawn 3x, both tracking terms four times heavier (docs/recipe-study.md, E52, then 400 more "
+    "iterations)",
     PROFILES["cpu_oscillators"].overrides + (
         "train.max_iterations=1600",
         "train.save_interval=100",
@@ -115,7 +116,10 @@ PROFILES["cpu_envelope"] = Profile(
         "rewards.second_stage.tracking_error=absolute",
         "train.actor.hidden_dims=[256, 256, 128]",
         "train.critic.hidden_dims=[256, 256, 128]",
-        "rewards.second_stage.weights={swing_grf: 10.0, stance_grf: 10.0, swing_contact: 5.0}",
+        # Both tracking terms four times heavier with the doubled phase rewards: a gait locked at the wrong speed
+        # then pays less than the command (recipe study, "Both tracking terms four times heavier").
+        "rewards.second_stage.weights={swing_grf: 10.0, stance_grf: 10.0, swing_contact: 5.0, "
+        "tracking_lin_vel: 16.0, tracking_ang_vel: 8.0}",
         "osc.second_stage.start_step=14400",
         "osc.second_stage.coupling_off_prob=0.375",
         "osc.second_stage.uncoupled_gait_weights=[1.0, 1.0, 3.0, 1.0]",

@@ -120,8 +120,11 @@ def test_cpu_envelope_switches_stage_at_600_and_its_env_draws_the_stated_starts(
     assert train.max_iterations == 1600  # E52's 1200 and 400 more, which ORC-110 needs for 3 m/s
     assert stage.start_step == env_cfg.osc.second_stage.start_step == switch  # iteration 600, halfway through E52
     assert stage.tracking_error == "absolute" and env_cfg.rewards.tracking_error == "relative"
-    assert stage.weights == {"swing_grf": 10.0, "stance_grf": 10.0, "swing_contact": 5.0} != {
+    assert stage.weights == {"swing_grf": 10.0, "stance_grf": 10.0, "swing_contact": 5.0,
+                             "tracking_lin_vel": 16.0, "tracking_ang_vel": 8.0} != {
         k: env_cfg.rewards.weights[k] for k in stage.weights}
+    for term in ("tracking_lin_vel", "tracking_ang_vel"):  # both four times the first stage's
+        assert stage.weights[term] == 4 * env_cfg.rewards.weights[term]
     assert list(train.actor.hidden_dims) == list(train.critic.hidden_dims) == [256, 256, 128]  # E50, E52
     # The profile builds; its uncoupled starts are a quarter, uniform over the gaits, then three-eighths
     # with bound drawn three times as often as each other gait.
