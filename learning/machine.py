@@ -23,7 +23,8 @@ CPU_STEPS_PER_S = 22_000
 CPU_MIRRORED_STEPS_PER_S = 14_500
 CPU_RECIPE_HIDDEN_DIMS = (128, 128, 64)
 # With the paper's [256, 256, 128] networks and mirror augmentation (cpu_envelope from E52): 3.5 s per iteration of
-# 24,576 env steps at two threads on the same machine (E51), 7.0k env steps/s.
+# 24,576 env steps at two threads on the same machine (E51), 7.0k env steps/s. On 2026-12-07 the same machine ran
+# it alone at 5.0-5.3 s per iteration (four runs): the estimate is the idle rate, a slower host takes longer.
 PAPER_HIDDEN_DIMS = (256, 256, 128)
 CPU_MIRRORED_PAPER_NETWORK_STEPS_PER_S = 7_000
 CPU_RATES = {
