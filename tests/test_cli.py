@@ -330,12 +330,20 @@ def test_a_second_ctrl_c_exits_quietly(tmp_path, capsys, monkeypatch):
 
 
 def test_sigkill_during_saves_leaves_loadable_checkpoints_and_resume_cleans_up(tmp_path, capsys):
-    """Fault injection: kill -9 the moment a checkpoint is being written (every iteration saves)."""
-    cmd = [sys.executable, "train.py", "--task", "mini_cheetah_osc", "--log_root", str(tmp_path), "--seed", "4",
+    """Fault injection: kill -9 the moment a checkpoint is being written (every iteration saves). The child's
+    torch.save lingers 0.5 s after writing, inside the save, so the kill lands there on a busy machine too."""
+    slow_save = ("import runpy, sys, time, torch\n"
+                 "save = torch.save\n"
+                 "def lingering_save(obj, f, *args, **kwargs):\n"
+                 "    save(obj, f, *args, **kwargs); f.flush(); time.sleep(0.5)\n"
+                 "torch.save = lingering_save\n"
+                 "sys.argv[0] = 'train.py'\n"
+                 "runpy.run_path('train.py', run_name='__main__')\n")
+    cmd = [sys.executable, "-c", slow_save, "--task", "mini_cheetah_osc", "--log_root", str(tmp_path), "--seed", "4",
            "--max_iterations", "100000", "--num_envs", "4", "--num_threads", "1", "--set", "train.num_steps_per_env=2",
            "--set", "train.save_interval=1", "--set", "train.algorithm.num_mini_batches=1"]
     left = []
-    for attempt in range(4):  # the kill can land just after a rename; try again until it lands inside a save
+    for attempt in range(4):  # should the kill still land after a rename, try again
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 60
         while proc.poll() is None and time.monotonic() < deadline:
